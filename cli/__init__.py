@@ -1,0 +1,1 @@
+"""The ``hybridneus`` command-line tool (Typer). Installed as ``hybridneus.cli``."""

@@ -1,0 +1,57 @@
+"""The ``hybridneus`` Typer application: one sub-command per module in this package.
+
+Command modules import torch, Open3D and the rest inside their functions, so that
+``hybridneus --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import typer
+
+from hybridneus.errors import HybridNeusError
+
+app = typer.Typer(
+    name="hybridneus",
+    help="Coloured 3D meshes from a single colour event camera (EventNeuS, pure PyTorch).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+# (command name, module under hybridneus.cli, function name). Each module owns one command.
+_COMMANDS: list[tuple[str, str, str]] = [
+]
+
+for _name, _module, _func in _COMMANDS:
+    app.command(_name)(getattr(importlib.import_module(f"hybridneus.cli.{_module}"), _func))
+
+
+def main() -> None:
+    """Console-script entry point: bad input becomes one line on stderr and exit code 2."""
+    try:
+        app(standalone_mode=False)
+    except HybridNeusError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        sys.exit(2)
+    except typer.Exit as exc:
+        sys.exit(exc.exit_code)
+    except typer.Abort:
+        typer.echo("aborted", err=True)
+        sys.exit(130)
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        sys.exit(130)
+    except Exception as exc:  # click usage errors carry their own exit code
+        import click
+
+        if isinstance(exc, click.exceptions.ClickException):
+            exc.show()
+            sys.exit(exc.exit_code)
+        raise
+
+
+if __name__ == "__main__":
+    main()

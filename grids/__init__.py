@@ -1,0 +1,1 @@
+"""Pure-PyTorch feature-grid encodings (installed as ``hybridneus.grids``)."""
