@@ -1,0 +1,147 @@
+"""Camera rays in the EventNeRF convention, unit-sphere bounds and pose interpolation.
+
+Conventions (as the EventNeRF reference code):
+
+- A pixel ``(x, y)`` = (column, row) is sampled at its centre ``(x + 0.5, y + 0.5)``.
+- Camera coordinates ``(xn, yn, 1)`` with ``xn = (x + 0.5 - cx) / fx``,
+  ``yn = (y + 0.5 - cy) / fy`` (skew, if K has one, is removed through K^-1), then the
+  approximate radial undistortion ``xn, yn /= 1 + k1 r^2 + k2 r^4`` with ``r^2 = xn^2 + yn^2``.
+- OpenCV camera axes (x right, y down, z forward); the direction is rotated by the
+  camera-to-world rotation and normalised; the origin is the camera centre.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+ArrayLike = np.ndarray | torch.Tensor
+
+
+def _as_f64(a: ArrayLike, device: torch.device) -> torch.Tensor:
+    if isinstance(a, torch.Tensor):
+        return a.to(device=device, dtype=torch.float64)
+    return torch.as_tensor(np.asarray(a), dtype=torch.float64, device=device)
+
+
+def camera_rays(
+    K: ArrayLike,
+    distortion: ArrayLike | None,
+    c2w: ArrayLike,
+    xy: ArrayLike,
+    device: str | torch.device | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rays through pixel centres.
+
+    Args:
+        K: (3, 3) or (n_rays, 3, 3) pinhole matrix.
+        distortion: (2,) or (n_rays, 2) radial coefficients (k1, k2), or None for none.
+        c2w: (4, 4), (3, 4), (n_rays, 4, 4) or (n_rays, 3, 4) camera-to-world (OpenCV axes).
+        xy: (n_rays, 2) integer pixel coordinates, column first (x = column, y = row).
+        device: output device; default: that of ``xy`` if it is a tensor, else CPU.
+
+    Returns:
+        - origins: (n_rays, 3) float32 camera centres.
+        - dirs: (n_rays, 3) float32 unit directions in world coordinates.
+
+    Note:
+        Computed in float64 and cast at the end; not meant to be differentiated (poses are
+        fixed inputs).
+    """
+    if device is None:
+        device = xy.device if isinstance(xy, torch.Tensor) else torch.device("cpu")
+    device = torch.device(device)
+    pix = _as_f64(xy, device).reshape(-1, 2) + 0.5
+    Kt = _as_f64(K, device)
+    Kinv = torch.linalg.inv(Kt)
+    ones = torch.ones_like(pix[:, :1])
+    uv1 = torch.cat([pix, ones], dim=-1)
+    if Kinv.ndim == 2:
+        cam = uv1 @ Kinv.T
+    else:
+        cam = torch.einsum("nij,nj->ni", Kinv, uv1)
+    cam = cam / cam[:, 2:3]
+    if distortion is not None:
+        d = _as_f64(distortion, device).reshape(-1, 2)
+        r2 = cam[:, 0] ** 2 + cam[:, 1] ** 2
+        factor = 1.0 + d[:, 0] * r2 + d[:, 1] * r2 * r2
+        cam = torch.cat([cam[:, :2] / factor[:, None], cam[:, 2:]], dim=-1)
+    pose = _as_f64(c2w, device)
+    rot = pose[..., :3, :3]
+    if rot.ndim == 2:
+        dirs = cam @ rot.T
+        origins = pose[:3, 3].expand(cam.shape[0], 3)
+    else:
+        dirs = torch.einsum("nij,nj->ni", rot, cam)
+        origins = pose[:, :3, 3]
+    dirs = dirs / torch.linalg.norm(dirs, dim=-1, keepdim=True)
+    return origins.to(torch.float32).contiguous(), dirs.to(torch.float32).contiguous()
+
+
+def near_far_unit_sphere(
+    origins: torch.Tensor, dirs: torch.Tensor, radius: float = 1.0, near_eps: float = 1e-2
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Ray distances where the rays are inside the sphere ``|p| <= radius``.
+
+    Cameras of EventNeRF datasets lie inside the unit sphere (NeRF++ normalisation), so
+    ``near`` is a small epsilon and ``far`` is where the ray leaves the sphere. A ray that
+    starts outside gets the entry point as ``near``; one that misses gets ``near = far``.
+
+    Args:
+        origins: (n_rays, 3) ray origins.
+        dirs: (n_rays, 3) unit directions.
+        radius: sphere radius. Default: 1.0.
+        near_eps: smallest ``near``. Default: 1e-2.
+
+    Returns:
+        - near: (n_rays,)
+        - far: (n_rays,)
+
+    Note:
+        Differentiable in ``origins`` and ``dirs`` (not needed in training).
+    """
+    b = (origins * dirs).sum(-1)
+    c = (origins * origins).sum(-1) - radius * radius
+    disc = b * b - c
+    root = torch.sqrt(torch.clamp(disc, min=0.0))
+    far = torch.clamp(-b + root, min=near_eps)
+    near = torch.where(c < 0, torch.full_like(b, near_eps), torch.clamp(-b - root, min=near_eps))
+    near = torch.where(disc < 0, far, torch.minimum(near, far))
+    return near, far
+
+
+def interpolate_pose(c2w_a: np.ndarray, c2w_b: np.ndarray, w: float | np.ndarray) -> np.ndarray:
+    """Camera-to-world pose between two poses: slerp of the rotation, lerp of the position.
+
+    Args:
+        c2w_a: (4, 4) or (n, 4, 4) pose at ``w = 0``.
+        c2w_b: (4, 4) or (n, 4, 4) pose at ``w = 1``.
+        w: scalar or (n,) weights in [0, 1].
+
+    Returns:
+        (4, 4) or (n, 4, 4) float64 pose; ``w = 0`` gives ``c2w_a`` and ``w = 1`` ``c2w_b``
+        (up to float rounding). The rotation follows the shorter arc.
+    """
+    a = np.asarray(c2w_a, dtype=np.float64)
+    b = np.asarray(c2w_b, dtype=np.float64)
+    single = a.ndim == 2 and b.ndim == 2 and np.ndim(w) == 0
+    a4 = a.reshape(-1, 4, 4)
+    b4 = b.reshape(-1, 4, 4)
+    wv = np.asarray(w, dtype=np.float64).reshape(-1)
+    n = max(a4.shape[0], b4.shape[0], wv.shape[0])
+    a4 = np.broadcast_to(a4, (n, 4, 4))
+    b4 = np.broadcast_to(b4, (n, 4, 4))
+    wv = np.broadcast_to(wv, (n,))
+    ra = Rotation.from_matrix(a4[:, :3, :3])
+    rb = Rotation.from_matrix(b4[:, :3, :3])
+    rel = (ra.inv() * rb).as_rotvec()  # rotation vectors are the shorter arc
+    rot = ra * Rotation.from_rotvec(rel * wv[:, None])
+    out = np.zeros((n, 4, 4))
+    out[:, :3, :3] = rot.as_matrix()
+    out[:, :3, 3] = (1.0 - wv)[:, None] * a4[:, :3, 3] + wv[:, None] * b4[:, :3, 3]
+    out[:, 3, 3] = 1.0
+    # Exact endpoints (avoid quaternion round-trip noise where callers compare poses).
+    out[wv == 0.0] = a4[wv == 0.0]
+    out[wv == 1.0] = b4[wv == 1.0]
+    return out[0] if single else out
