@@ -1,1 +1,30 @@
-"""Pure-PyTorch feature-grid encodings (installed as ``hybridneus.grids``)."""
+"""Pure-PyTorch feature-grid encodings (installed as ``hybridneus.grids``).
+
+Exact tiny-cuda-nn-style multiresolution hash and dense grids, spherical harmonics and a
+NeuS frequency encoding with EventNeuS annealing; all twice differentiable, CPU and CUDA.
+See docs/grids.md.
+"""
+
+from .frequency import FrequencyEncoding, annealing_weights
+from .gather import gather_rows, interpolate_corners, scatter_rows
+from .hash import DenseGrid, HashGrid, level_corners
+from .levels import PRIMES, GridLevel, make_levels, per_level_scale
+from .schedule import LevelSchedule
+from .spherical import SphericalHarmonics
+
+__all__ = [
+    "DenseGrid",
+    "FrequencyEncoding",
+    "GridLevel",
+    "HashGrid",
+    "LevelSchedule",
+    "PRIMES",
+    "SphericalHarmonics",
+    "annealing_weights",
+    "gather_rows",
+    "interpolate_corners",
+    "level_corners",
+    "make_levels",
+    "per_level_scale",
+    "scatter_rows",
+]

@@ -1,0 +1,308 @@
+"""HashGrid / DenseGrid against a slow per-point reference, plus gradients of all orders."""
+
+from __future__ import annotations
+
+import math
+
+import hybridneus.grids as grids
+import pytest
+import torch
+from hybridneus.grids import DenseGrid, HashGrid, level_corners
+from torch.autograd import gradcheck, gradgradcheck
+from torch.func import functional_call
+
+from hybridneus.errors import ConfigError
+
+P1, P2 = 2654435761, 805459861
+
+
+def _reference_encode(x, tables, n_levels, base, finest, log2_t):
+    """Obviously-correct encoding: Python loops over points, levels and corners."""
+    t_max = None if log2_t is None else 2**log2_t
+    b = math.exp(math.log(finest / base) / (n_levels - 1)) if n_levels > 1 else 1.0
+    rows = []
+    for p in range(x.shape[0]):
+        feats = []
+        for lvl in range(n_levels):
+            scale = base * b**lvl - 1.0
+            side = math.floor(scale + 0.5) + 2
+            hashed = t_max is not None and side**3 > t_max
+            pos = [x[p, d] * scale + 0.5 for d in range(3)]
+            cell = [math.floor(float(v.detach()) if torch.is_tensor(v) else v) for v in pos]
+            acc = 0.0
+            for dz in (0, 1):
+                for dy in (0, 1):
+                    for dx in (0, 1):
+                        c = (cell[0] + dx, cell[1] + dy, cell[2] + dz)
+                        if hashed:
+                            h = ((c[0] * 1) ^ (c[1] * P1) ^ (c[2] * P2)) & 0xFFFFFFFF
+                            row = h % t_max
+                        else:
+                            row = c[0] + c[1] * side + c[2] * side * side
+                        w = 1.0
+                        for d, bit in enumerate((dx, dy, dz)):
+                            frac = pos[d] - cell[d]
+                            w = w * (frac if bit else 1.0 - frac)
+                        acc = acc + w * tables[lvl][row]
+            feats.append(acc)
+        rows.append(torch.cat(feats))
+    return torch.stack(rows)
+
+
+CONFIGS = [
+    # (n_levels, F, log2_T, base, finest): mixes dense and hashed levels.
+    (4, 2, 9, 4, 40),
+    (3, 1, 10, 3, 30),
+    (3, 4, 8, 2, 20),
+    (2, 3, 9, 5, 9),
+]
+
+
+def _points(n, dtype=torch.float64, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    x = torch.rand(n, 3, generator=g, dtype=dtype)
+    # Include the borders, where the top corner of the half-cell offset is used.
+    x[0] = 0.0
+    x[1] = 1.0
+    x[2] = torch.tensor([1.0, 0.0, 0.999999], dtype=dtype)
+    return x
+
+
+def _random_tables(grid, seed=1):
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for t in grid.tables:
+            t.copy_(torch.randn(t.shape, generator=g, dtype=t.dtype))
+
+
+@pytest.mark.parametrize("cfg", CONFIGS)
+def test_hashgrid_matches_reference(cfg):
+    n_levels, f, log2_t, base, finest = cfg
+    grid = HashGrid(n_levels, f, log2_t, base, finest, dtype=torch.float64)
+    _random_tables(grid)
+    assert any(lvl.hashed for lvl in grid.levels) and any(not lvl.hashed for lvl in grid.levels)
+    x = _points(9)
+    ref = _reference_encode(x, list(grid.tables), n_levels, base, finest, log2_t)
+    out = grid(x)
+    assert out.shape == (9, n_levels * f) == (9, grid.out_dim)
+    torch.testing.assert_close(out, ref, rtol=1e-12, atol=1e-12)
+
+
+def test_densegrid_matches_reference():
+    grid = DenseGrid(3, 2, 3, 17, dtype=torch.float64)
+    _random_tables(grid)
+    assert not any(lvl.hashed for lvl in grid.levels)
+    x = _points(7)
+    ref = _reference_encode(x, list(grid.tables), 3, 3, 17, None)
+    torch.testing.assert_close(grid(x), ref, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("cfg", CONFIGS[:2])
+def test_gradients_match_reference(cfg):
+    """First and second-order (Eikonal-style) gradients against autograd on the reference."""
+    n_levels, f, log2_t, base, finest = cfg
+    grid = HashGrid(n_levels, f, log2_t, base, finest, dtype=torch.float64)
+    _random_tables(grid)
+    x = _points(6, seed=3)
+    gen = torch.Generator().manual_seed(5)
+    head = torch.randn(grid.out_dim, dtype=torch.float64, generator=gen)
+
+    def losses(encode, params):
+        xr = x.clone().requires_grad_(True)
+        sdf = encode(xr) @ head
+        (gx,) = torch.autograd.grad(sdf.sum(), xr, create_graph=True)
+        eik = ((gx.norm(dim=-1) - 1.0) ** 2).sum()
+        g1 = torch.autograd.grad(sdf.sum(), params, retain_graph=True)
+        g2 = torch.autograd.grad(eik, [*params, xr])
+        return gx.detach(), g1, g2
+
+    params = list(grid.tables)
+    fast = losses(grid, params)
+    ref_tables = [t.detach().clone().requires_grad_(True) for t in grid.tables]
+    slow = losses(
+        lambda xr: _reference_encode(xr, ref_tables, n_levels, base, finest, log2_t), ref_tables
+    )
+    torch.testing.assert_close(fast[0], slow[0])
+    for a, b in zip(fast[1], slow[1], strict=True):
+        torch.testing.assert_close(a, b)
+    for a, b in zip(fast[2], slow[2], strict=True):
+        torch.testing.assert_close(a, b)
+
+
+def _tiny_grid():
+    grid = HashGrid(3, 2, 6, 2, 12, dtype=torch.float64)
+    _random_tables(grid)
+    return grid
+
+
+def test_gradcheck_x_first_and_second_order():
+    grid = _tiny_grid()
+    # Keep points away from cell faces, where the trilinear derivative jumps.
+    x = torch.tensor([[0.31, 0.47, 0.62], [0.13, 0.88, 0.41]], dtype=torch.float64)
+    x.requires_grad_(True)
+    assert gradcheck(grid, (x,), eps=1e-6, atol=1e-6)
+    assert gradgradcheck(grid, (x,), eps=1e-6, atol=1e-6)
+
+
+def test_gradcheck_tables_first_and_second_order():
+    grid = _tiny_grid()
+    x = torch.tensor([[0.31, 0.47, 0.62], [0.13, 0.88, 0.41]], dtype=torch.float64)
+    names = [f"tables.{i}" for i in range(grid.n_levels)]
+
+    def f(xx, *tables):
+        return functional_call(grid, dict(zip(names, tables, strict=True)), (xx,))
+
+    tables = tuple(t.detach().clone().requires_grad_(True) for t in grid.tables)
+    xx = x.clone().requires_grad_(True)
+    assert gradcheck(f, (xx, *tables), eps=1e-6, atol=1e-6)
+    assert gradgradcheck(f, (xx, *tables), eps=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("n_features", [1, 2, 3, 4])
+def test_primitive_gradchecks(n_features):
+    g = torch.Generator().manual_seed(0)
+    table = torch.randn(5, n_features, dtype=torch.float64, generator=g, requires_grad=True)
+    idx = torch.randint(0, 5, (8, 4), generator=g)
+    w = torch.rand(8, 4, dtype=torch.float64, generator=g, requires_grad=True)
+    fn = grids.interpolate_corners
+    assert gradcheck(fn, (table, idx, w))
+    assert gradgradcheck(fn, (table, idx, w))
+    src = torch.randn(6, n_features, dtype=torch.float64, generator=g, requires_grad=True)
+    flat = torch.tensor([0, 2, 2, 4, 0, 1])
+    assert gradgradcheck(lambda s: grids.scatter_rows(s, flat, 5), (src,))
+    assert gradgradcheck(lambda t: grids.gather_rows(t, flat), (table,))
+
+
+def test_hash_rows_inside_table_and_match_tcnn_hash():
+    grid = HashGrid(16, 2, 15, 16, 2048)
+    x = torch.rand(3, 2000) * 1.4 - 0.2  # includes points outside [0, 1]^3
+    for lvl in grid.levels:
+        idx, w = level_corners(x, lvl)
+        assert idx.dtype == torch.int64
+        assert int(idx.min()) >= 0 and int(idx.max()) < lvl.table_size
+        torch.testing.assert_close(w.sum(0), torch.ones(2000))
+    lvl = grid.levels[-1]
+    assert lvl.hashed
+    xi = torch.tensor([[0.3], [0.6], [0.9]], dtype=torch.float64)
+    idx, _ = level_corners(xi, lvl)
+    c = [math.floor(float(v) * lvl.scale + 0.5) for v in xi[:, 0]]
+    h = (c[0] ^ (c[1] * P1) ^ (c[2] * P2)) & 0xFFFFFFFF & (2**15 - 1)
+    assert int(idx[0, 0]) == h
+
+
+def test_dense_levels_are_collision_free():
+    grid = HashGrid(4, 2, 15, 6, 31)
+    for lvl in grid.levels:
+        if lvl.hashed:
+            continue
+        s = lvl.side
+        assert lvl.table_size == s**3 <= 2**15
+        # One point per reachable cell (cell centres of the staggered grid) covers every corner.
+        c = torch.arange(s - 1, dtype=torch.float64)
+        cz, cy, cx = torch.meshgrid(c, c, c, indexing="ij")
+        cells = torch.stack((cx, cy, cz)).reshape(3, -1)
+        x = ((cells + 0.5 - 0.5) / lvl.scale).clamp(0, 1)
+        idx, _ = level_corners(x, lvl)
+        pos = (x * lvl.scale + 0.5).floor().long()
+        corners = {}
+        for k, (dz, dy, dx) in enumerate(
+            (dz, dy, dx) for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)
+        ):
+            coords = pos + torch.tensor([[dx], [dy], [dz]])
+            for j in range(coords.shape[1]):
+                key = tuple(coords[:, j].tolist())
+                row = int(idx[k, j])
+                assert corners.setdefault(key, row) == row
+        assert len(set(corners.values())) == len(corners)  # distinct corners, distinct rows
+        assert max(corners.values()) < lvl.table_size
+
+
+def test_default_level_geometry():
+    grid = HashGrid()
+    assert grid.out_dim == 32
+    assert [lvl.hashed for lvl in grid.levels] == [False] * 5 + [True] * 11
+    assert grid.levels[0].scale == 15.0 and grid.levels[0].resolution == 16
+    assert grid.levels[-1].resolution == 2048
+    assert all(t.shape == (lvl.table_size, 2) for t, lvl in zip(grid.tables, grid.levels,
+                                                                  strict=True))
+    assert all(float(t.abs().max()) <= 1e-4 for t in grid.tables)
+    assert grid.levels[5].table_size == 2**19
+
+
+def test_inactive_levels_are_zero_and_get_no_gradient():
+    grid = _tiny_grid()
+    grid.set_active_levels(1)
+    assert grid.active_levels == 1
+    x = torch.rand(10, 3, dtype=torch.float64)
+    out = grid(x)
+    assert torch.all(out[:, 2:] == 0) and torch.any(out[:, :2] != 0)
+    out.sum().backward()
+    assert grid.tables[0].grad is not None
+    assert grid.tables[1].grad is None and grid.tables[2].grad is None
+    grid.set_active_levels(99)
+    assert grid.active_levels == 3
+    grid.set_active_levels(0)
+    assert grid.active_levels == 1
+
+
+@pytest.mark.parametrize("shape", [(3,), (0, 3), (2, 5, 3), (2, 1, 4, 3)])
+def test_any_batch_shape(shape):
+    grid = _tiny_grid()
+    x = torch.rand(shape, dtype=torch.float64)
+    out = grid(x)
+    assert out.shape == (*shape[:-1], grid.out_dim)
+    torch.testing.assert_close(out.reshape(-1, grid.out_dim), grid(x.reshape(-1, 3)))
+
+
+def test_float32_matches_float64_and_casts_input():
+    g64 = HashGrid(4, 2, 10, 4, 64, dtype=torch.float64)
+    g32 = HashGrid(4, 2, 10, 4, 64)
+    _random_tables(g64)
+    g32.load_state_dict({k: v.float() for k, v in g64.state_dict().items()})
+    x = torch.rand(100, 3, dtype=torch.float64) * 0.98 + 0.01
+    out32 = g32(x)
+    assert out32.dtype == torch.float32
+    torch.testing.assert_close(out32.double(), g64(x), rtol=1e-4, atol=1e-4)
+
+
+def test_int32_indices_match_int64():
+    grid = HashGrid(6, 2, 12, 4, 256)
+    x = torch.rand(500, 3)
+    ref = grid(x)
+    grid.index_dtype = torch.int32
+    torch.testing.assert_close(grid(x), ref)
+
+
+def test_bad_config_and_shape_raise():
+    with pytest.raises(ConfigError, match="log2_hashmap_size"):
+        HashGrid(log2_hashmap_size=40)
+    with pytest.raises(ConfigError, match="n_levels"):
+        HashGrid(n_levels=0)
+    with pytest.raises(ConfigError, match="dtype"):
+        HashGrid(dtype=torch.float16)
+    with pytest.raises(ValueError, match=r"\(\*, 3\)"):
+        HashGrid(2, 2, 8, 2, 4)(torch.rand(4, 2))
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_matches_cpu():
+    grid = HashGrid(8, 2, 14, 8, 256, dtype=torch.float64)
+    _random_tables(grid)
+    x = torch.rand(1000, 3, dtype=torch.float64)
+    gcuda = HashGrid(8, 2, 14, 8, 256, dtype=torch.float64).cuda()
+    gcuda.load_state_dict(grid.state_dict())
+    head = torch.randn(grid.out_dim, dtype=torch.float64)
+
+    def run(g, xx):
+        xx = xx.clone().requires_grad_(True)
+        sdf = g(xx) @ head.to(xx.device)
+        (gx,) = torch.autograd.grad(sdf.sum(), xx, create_graph=True)
+        (gx.square().sum() + sdf.sum()).backward()
+        return sdf.detach().cpu(), [t.grad.cpu() for t in g.tables]
+
+    a, ga = run(grid, x)
+    b, gb = run(gcuda, x.cuda())
+    torch.testing.assert_close(a, b)
+    for u, v in zip(ga, gb, strict=True):
+        torch.testing.assert_close(u, v)
