@@ -23,6 +23,8 @@ app = typer.Typer(
 
 # (command name, module under hybridneus.cli, function name). Each module owns one command.
 _COMMANDS: list[tuple[str, str, str]] = [
+    ("info", "info", "info"),
+    ("preview", "preview", "preview"),
 ]
 
 for _name, _module, _func in _COMMANDS:

@@ -1,0 +1,81 @@
+"""``hybridneus info DATA``: what a dataset holds and which preset will be used."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def info(
+    data: Annotated[Path, typer.Argument(help="Dataset folder, e.g. data/real/multimeter.")],
+    preset_override: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--preset-override",
+            "-o",
+            help="Replace a preset field, key=value (repeatable), e.g. threshold=0.2.",
+        ),
+    ] = None,
+    split: Annotated[
+        list[str] | None,
+        typer.Option("--split", help="Only these splits (repeatable). Default: all."),
+    ] = None,
+) -> None:
+    """Show a dataset's splits (views, events, polarity balance, time span, resolution) and
+    the preset in use with its source."""
+    import logging
+
+    import numpy as np
+    from rich.console import Console
+    from rich.table import Table
+
+    from hybridneus.data import load_dataset, parse_override_strings
+
+    # The notes are printed below; keep the logging copies of them off the terminal.
+    logging.getLogger("hybridneus.data").setLevel(logging.ERROR)
+    overrides = parse_override_strings(preset_override)
+    ds = load_dataset(data, overrides=overrides or None, splits=split or None)
+    console = Console()
+
+    table = Table(title=f"{ds.root}")
+    for col in ("split", "views", "events", "+ / -", "time span", "resolution", "rgb",
+                "events npz"):
+        table.add_column(col, justify="right" if col in ("views", "events") else "left")
+    for s in ds.splits.values():
+        ev = s.events
+        n = len(ev)
+        n_pos = ev.n_positive
+        span = f"{float(ev.t[0]):.6g} .. {float(ev.t[-1]):.6g}"
+        table.add_row(
+            s.name,
+            str(s.n_views),
+            f"{n:,}",
+            f"{n_pos / n:.1%} / {(n - n_pos) / n:.1%}",
+            span,
+            f"{s.width}x{s.height}",
+            f"{len(s.rgb_paths)} files" if s.rgb_paths else "absent",
+            ev.path.name if ev.path else "",
+        )
+    console.print(table)
+
+    p = ds.preset
+    ptable = Table(title="preset")
+    ptable.add_column("key")
+    ptable.add_column("value")
+    for key, value in p.to_dict().items():
+        if key == "background":
+            value = ", ".join(f"{v:.4g} ({v * 255:.0f}/255)" for v in value)
+        ptable.add_row(key, str(value))
+    console.print(ptable)
+    console.print(f"preset source: {ds.preset_source}", markup=False, highlight=False)
+    for s in ds.splits.values():
+        console.print(f"{s.name}: polarity stored as {s.events.polarity_note}",
+                      markup=False, highlight=False)
+        if s.distortion.any():
+            k = np.median(s.distortion, axis=0)
+            console.print(f"{s.name}: radial distortion k1={k[0]:.4g}, k2={k[1]:.4g}",
+                          markup=False, highlight=False)
+    for note in ds.notes:
+        console.print(f"note: {note}", markup=False, highlight=False)
