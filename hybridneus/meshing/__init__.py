@@ -1,1 +1,40 @@
-"""hybridneus.meshing."""
+"""Meshes from fields: marching cubes in a narrow band, clean-up, vertex colours, file I/O.
+
+Public API::
+
+    from hybridneus.meshing import extract_mesh, PostprocessOptions, CropVolume, save_mesh
+    mesh = extract_mesh(field, res=300, color=True)      # trimesh.Trimesh, world coordinates
+    save_mesh(mesh, "mesh.ply")
+
+See docs/meshing.md.
+"""
+
+from hybridneus.meshing.convert import (
+    MESH_FORMATS,
+    load_mesh,
+    mesh_from_numpy,
+    mesh_from_open3d,
+    mesh_to_numpy,
+    mesh_to_open3d,
+    save_mesh,
+)
+from hybridneus.meshing.extract import ExtractionStats, extract_mesh, extract_sdf_mesh
+from hybridneus.meshing.postprocess import PostprocessOptions, postprocess_mesh
+from hybridneus.meshing.volume import CropVolume, VoxelGrid
+
+__all__ = [
+    "MESH_FORMATS",
+    "CropVolume",
+    "ExtractionStats",
+    "PostprocessOptions",
+    "VoxelGrid",
+    "extract_mesh",
+    "extract_sdf_mesh",
+    "load_mesh",
+    "mesh_from_numpy",
+    "mesh_from_open3d",
+    "mesh_to_numpy",
+    "mesh_to_open3d",
+    "postprocess_mesh",
+    "save_mesh",
+]

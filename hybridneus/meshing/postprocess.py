@@ -1,0 +1,187 @@
+"""Mesh clean-up after marching cubes: clip, weld, de-duplicate, repair, drop floaters, decimate.
+
+Order (each step optional, see :class:`PostprocessOptions`):
+    1. clip to the crop cylinder (faces with a vertex outside are dropped);
+    2. merge vertices closer than ``merge_distance``; remove duplicate and zero-area faces;
+    3. repair non-manifold edges (by removing faces) and vertices (by splitting);
+    4. remove connected components smaller than ``min_component_diameter`` (fraction of the
+       whole mesh's bounding-box diagonal) and/or with fewer than ``min_component_faces`` faces;
+    5. ``keep_largest``: keep only the component with the most faces;
+    6. quadric edge-collapse decimation to ``decimate`` faces.
+Vertex colours (``mesh.visual.vertex_colors``) survive every step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from hybridneus.meshing.volume import CropVolume
+
+
+@dataclass
+class PostprocessOptions:
+    """Which clean-up steps :func:`postprocess_mesh` runs (defaults: all cleaning, no decimation).
+
+    Attributes:
+        enabled: run post-processing at all.
+        merge_distance: weld vertices closer than this (world units); None = 1e-5 x diagonal.
+        remove_duplicate_faces: drop repeated and zero-area faces.
+        repair_non_manifold: remove faces on non-manifold edges, split non-manifold vertices.
+        min_component_diameter: drop components whose bounding-box diagonal is below this
+            fraction of the whole mesh's diagonal (0.05 = 5%); None or 0 disables.
+        min_component_faces: drop components with fewer faces; None or 0 disables.
+        keep_largest: keep only the connected component with the most faces.
+        decimate: target face count for quadric decimation; None disables.
+        clip: crop cylinder to clip the mesh to; None disables.
+    """
+
+    enabled: bool = True
+    merge_distance: float | None = None
+    remove_duplicate_faces: bool = True
+    repair_non_manifold: bool = True
+    min_component_diameter: float | None = 0.05
+    min_component_faces: int | None = None
+    keep_largest: bool = False
+    decimate: int | None = None
+    clip: CropVolume | None = None
+
+
+def _vertex_colors(mesh: trimesh.Trimesh) -> np.ndarray | None:
+    """The mesh's uint8 RGBA vertex colours (n_vertices, 4), or None when it has none."""
+    if mesh.visual.kind != "vertex":
+        return None
+    colors = np.asarray(mesh.visual.vertex_colors)
+    return colors if colors.shape[0] == mesh.vertices.shape[0] else None
+
+
+def _rebuild(
+    vertices: np.ndarray, faces: np.ndarray, colors: np.ndarray | None
+) -> trimesh.Trimesh:
+    """A trimesh without trimesh's own processing, keeping colours and dropping stray vertices."""
+    used = np.zeros(vertices.shape[0], dtype=bool)
+    used[faces.reshape(-1)] = True
+    remap = np.cumsum(used) - 1
+    kwargs = {}
+    if colors is not None:
+        kwargs["vertex_colors"] = colors[used]
+    return trimesh.Trimesh(vertices[used], remap[faces], process=False, **kwargs)
+
+
+def _to_meshset(mesh: trimesh.Trimesh, colors: np.ndarray | None):  # -> pymeshlab.MeshSet
+    """A pymeshlab MeshSet holding ``mesh`` (float64 vertices, int32 faces, float colours)."""
+    import pymeshlab
+
+    kwargs = {}
+    if colors is not None:
+        kwargs["v_color_matrix"] = colors.astype(np.float64) / 255.0
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(
+        pymeshlab.Mesh(
+            vertex_matrix=np.asarray(mesh.vertices, dtype=np.float64),
+            face_matrix=np.asarray(mesh.faces, dtype=np.int32),
+            **kwargs,
+        )
+    )
+    return ms
+
+
+def _from_meshset(ms, with_colors: bool) -> trimesh.Trimesh:
+    """The current mesh of a pymeshlab MeshSet as a trimesh (uint8 colours if asked)."""
+    out = ms.current_mesh()
+    colors = None
+    if with_colors:
+        colors = np.clip(np.round(out.vertex_color_matrix() * 255.0), 0, 255).astype(np.uint8)
+    return _rebuild(out.vertex_matrix(), out.face_matrix().astype(np.int64), colors)
+
+
+def clip_mesh(mesh: trimesh.Trimesh, crop: CropVolume) -> trimesh.Trimesh:
+    """Drop faces with any vertex outside ``crop``; keep colours."""
+    inside = crop.contains(np.asarray(mesh.vertices), margin=1e-9)
+    keep = inside[mesh.faces].all(axis=1)
+    return _rebuild(np.asarray(mesh.vertices), np.asarray(mesh.faces)[keep], _vertex_colors(mesh))
+
+
+def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Connected-component label (n_faces,) of each face (faces sharing a vertex are joined)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if faces.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    rows = np.concatenate([faces[:, 0], faces[:, 1]])
+    cols = np.concatenate([faces[:, 1], faces[:, 2]])
+    graph = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), (n_vertices,) * 2)
+    _, labels = connected_components(graph, directed=False)
+    return labels[faces[:, 0]]
+
+
+def keep_largest_component(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Only the connected component with the most faces (colours kept)."""
+    faces = np.asarray(mesh.faces)
+    if faces.shape[0] == 0:
+        return mesh
+    labels = face_components(faces, mesh.vertices.shape[0])
+    largest = np.bincount(labels).argmax()
+    return _rebuild(np.asarray(mesh.vertices), faces[labels == largest], _vertex_colors(mesh))
+
+
+def postprocess_mesh(
+    mesh: trimesh.Trimesh, options: PostprocessOptions | None = None
+) -> trimesh.Trimesh:
+    """Clean ``mesh`` as described in the module docstring; returns a new mesh.
+
+    Args:
+        mesh: triangle mesh in world coordinates, with optional vertex colours.
+        options: which steps to run; default :class:`PostprocessOptions()`.
+    """
+    import pymeshlab
+
+    options = options or PostprocessOptions()
+    if not options.enabled or len(mesh.faces) == 0:
+        return mesh
+    if options.clip is not None:
+        mesh = clip_mesh(mesh, options.clip)
+        if len(mesh.faces) == 0:
+            return mesh
+
+    colors = _vertex_colors(mesh)
+    ms = _to_meshset(mesh, colors)
+    diag = float(np.linalg.norm(np.ptp(np.asarray(mesh.vertices), axis=0)))
+    merge = options.merge_distance if options.merge_distance is not None else 1e-5 * diag
+    if merge > 0:
+        ms.meshing_merge_close_vertices(threshold=pymeshlab.PureValue(merge))
+    if options.remove_duplicate_faces:
+        ms.meshing_remove_duplicate_faces()
+        ms.meshing_remove_null_faces()
+    if options.repair_non_manifold:
+        ms.meshing_repair_non_manifold_edges(method="Remove Faces")
+        ms.meshing_repair_non_manifold_vertices()
+    if options.min_component_diameter:
+        ms.meshing_remove_connected_component_by_diameter(
+            mincomponentdiag=pymeshlab.PureValue(options.min_component_diameter * diag)
+        )
+    if options.min_component_faces:
+        ms.meshing_remove_connected_component_by_face_number(
+            mincomponentsize=int(options.min_component_faces)
+        )
+    ms.meshing_remove_unreferenced_vertices()
+    result = _from_meshset(ms, colors is not None)
+    if options.keep_largest:
+        result = keep_largest_component(result)
+    if options.decimate and len(result.faces) > options.decimate:
+        result = decimate_mesh(result, options.decimate)
+    return result
+
+
+def decimate_mesh(mesh: trimesh.Trimesh, target_faces: int) -> trimesh.Trimesh:
+    """Quadric edge-collapse decimation (pymeshlab) to about ``target_faces`` faces."""
+    colors = _vertex_colors(mesh)
+    ms = _to_meshset(mesh, colors)
+    ms.meshing_decimation_quadric_edge_collapse(
+        targetfacenum=int(target_faces), preservenormal=True, optimalplacement=True, autoclean=True
+    )
+    ms.meshing_remove_unreferenced_vertices()
+    return _from_meshset(ms, colors is not None)
