@@ -26,6 +26,7 @@ def info(
     """Show a dataset's splits (views, events, polarity balance, time span, resolution) and
     the preset in use with its source."""
     import logging
+    import sys
 
     import numpy as np
     from rich.console import Console
@@ -37,26 +38,26 @@ def info(
     logging.getLogger("hybridneus.data").setLevel(logging.ERROR)
     overrides = parse_override_strings(preset_override)
     ds = load_dataset(data, overrides=overrides or None, splits=split or None)
-    console = Console()
+    # Piped output (no terminal) still gets a table wide enough not to wrap its cells.
+    console = Console(width=None if sys.stdout.isatty() else 130)
 
     table = Table(title=f"{ds.root}")
-    for col in ("split", "views", "events", "+ / -", "time span", "resolution", "rgb",
-                "events npz"):
-        table.add_column(col, justify="right" if col in ("views", "events") else "left")
+    for col in ("split", "views", "events", "+ / -", "time span", "size", "rgb", "polarity"):
+        table.add_column(col, justify="right" if col in ("views", "events") else "left",
+                         no_wrap=True)
     for s in ds.splits.values():
         ev = s.events
         n = len(ev)
         n_pos = ev.n_positive
-        span = f"{float(ev.t[0]):.6g} .. {float(ev.t[-1]):.6g}"
         table.add_row(
             s.name,
             str(s.n_views),
             f"{n:,}",
             f"{n_pos / n:.1%} / {(n - n_pos) / n:.1%}",
-            span,
+            f"{float(ev.t[0]):.6g} .. {float(ev.t[-1]):.6g}",
             f"{s.width}x{s.height}",
             f"{len(s.rgb_paths)} files" if s.rgb_paths else "absent",
-            ev.path.name if ev.path else "",
+            "-1/+1" if ev.polarity_note == "-1/+1" else "0/1 -> -1/+1",
         )
     console.print(table)
 
@@ -71,11 +72,13 @@ def info(
     console.print(ptable)
     console.print(f"preset source: {ds.preset_source}", markup=False, highlight=False)
     for s in ds.splits.values():
-        console.print(f"{s.name}: polarity stored as {s.events.polarity_note}",
-                      markup=False, highlight=False)
+        console.print(f"{s.name}: events from {s.events.path}, polarity stored as "
+                      f"{s.events.polarity_note}", markup=False, highlight=False)
         if s.distortion.any():
             k = np.median(s.distortion, axis=0)
             console.print(f"{s.name}: radial distortion k1={k[0]:.4g}, k2={k[1]:.4g}",
                           markup=False, highlight=False)
     for note in ds.notes:
+        if "polarity stored as" in note:  # already shown per split above
+            continue
         console.print(f"note: {note}", markup=False, highlight=False)

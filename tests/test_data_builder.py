@@ -14,8 +14,9 @@ import numpy as np
 W, H = 24, 16
 
 
-def look_at_c2w(center: np.ndarray, target: np.ndarray = np.zeros(3)) -> np.ndarray:
+def look_at_c2w(center: np.ndarray, target: np.ndarray | None = None) -> np.ndarray:
     """(4, 4) OpenCV camera-to-world: z towards ``target``, y roughly along world -y."""
+    target = np.zeros(3) if target is None else target
     z = target - center
     z = z / np.linalg.norm(z)
     up = np.array([0.0, -1.0, 0.0])

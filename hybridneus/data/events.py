@@ -80,83 +80,161 @@ class EventStream:
         return self._pixel_code
 
 
-def _as_int16_pixels(arr: np.ndarray, key: str, path: Path) -> np.ndarray:
-    """Convert a pixel coordinate array to int16 once, refusing non-integral values."""
-    if arr.dtype == np.bool_ or not (
-        np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)
-    ):
-        raise DatasetError(f"{path}: key '{key}' has dtype {arr.dtype}, expected integers")
-    if np.issubdtype(arr.dtype, np.floating):
-        for s in range(0, arr.shape[0], _CHUNK):
-            chunk = arr[s : s + _CHUNK]
+class _PixelCheck:
+    """Per-chunk checks of ``x`` or ``y`` before the cast to int16."""
+
+    def __init__(self, key: str, path: Path) -> None:
+        self.key, self.path, self.max = key, path, -1
+
+    def __call__(self, chunk: np.ndarray) -> np.ndarray:
+        key, path = self.key, self.path
+        if chunk.dtype == np.bool_ or not (
+            np.issubdtype(chunk.dtype, np.integer) or np.issubdtype(chunk.dtype, np.floating)
+        ):
+            raise DatasetError(f"{path}: key '{key}' has dtype {chunk.dtype}, expected integers")
+        if np.issubdtype(chunk.dtype, np.floating):
             if not np.all(np.isfinite(chunk)):
                 raise DatasetError(f"{path}: key '{key}' holds NaN or inf")
             if not np.all(chunk == np.floor(chunk)):
                 raise DatasetError(f"{path}: key '{key}' holds non-integer pixel coordinates")
-    if arr.shape[0]:
-        lo, hi = arr.min(), arr.max()
+        lo, hi = chunk.min(), chunk.max()
         if lo < 0:
             raise DatasetError(
                 f"{path}: pixels outside the image: {key} has negative values (min {lo})"
             )
         if hi > np.iinfo(np.int16).max:
             raise DatasetError(f"{path}: pixels outside the image: {key} max {hi} is too large")
-    return arr.astype(np.int16, copy=False)
+        self.max = max(self.max, int(hi))
+        return chunk.astype(np.int16)
 
 
-def _as_polarity(arr: np.ndarray, path: Path) -> tuple[np.ndarray, str]:
-    """Convert polarity to int8 -1/+1, accepting -1/+1, 0/1 or booleans."""
-    if arr.dtype == np.bool_:
-        out = arr.astype(np.int8)
-        out *= 2
-        out -= 1
-        return out, "boolean 0/1 (converted to -1/+1)"
-    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
-        raise DatasetError(f"{path}: key 'p' has dtype {arr.dtype}, expected numbers")
-    n_zero = n_minus = n_plus = 0
-    for s in range(0, arr.shape[0], _CHUNK):
-        chunk = arr[s : s + _CHUNK]
+class _PolarityCheck:
+    """Per-chunk checks of ``p``: only -1/+1 or only 0/1 (or booleans)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.n_zero = self.n_minus = 0
+        self.boolean = False
+
+    def __call__(self, chunk: np.ndarray) -> np.ndarray:
+        if chunk.dtype == np.bool_:
+            self.boolean = True
+            self.n_zero += int(np.count_nonzero(~chunk))
+            return chunk.astype(np.int8)
+        if not (np.issubdtype(chunk.dtype, np.integer) or np.issubdtype(chunk.dtype, np.floating)):
+            raise DatasetError(f"{self.path}: key 'p' has dtype {chunk.dtype}, expected numbers")
         nz = int(np.count_nonzero(chunk == 0))
         nm = int(np.count_nonzero(chunk == -1))
         npl = int(np.count_nonzero(chunk == 1))
         if nz + nm + npl != chunk.shape[0]:
             bad = np.unique(chunk[(chunk != 0) & (chunk != 1) & (chunk != -1)])[:5]
             raise DatasetError(
-                f"{path}: polarity values {bad.tolist()} are neither -1/+1 nor 0/1"
+                f"{self.path}: polarity values {bad.tolist()} are neither -1/+1 nor 0/1"
             )
-        n_zero, n_minus, n_plus = n_zero + nz, n_minus + nm, n_plus + npl
-    if n_zero and n_minus:
-        raise DatasetError(
-            f"{path}: polarity holds -1, 0 and +1 values; expected either -1/+1 or 0/1"
-        )
-    out = arr.astype(np.int8, copy=False)
-    if n_zero:
-        # ``arr`` was read from the archive into memory we own, so in-place is safe.
-        out *= 2
-        out -= 1
-        return out, "0/1 (converted to -1/+1)"
-    return out, "-1/+1"
-
-
-def _check_sorted(t: np.ndarray, path: Path) -> None:
-    """Raise unless ``t`` is finite and non-decreasing (checked in chunks)."""
-    n = t.shape[0]
-    for s in range(0, n, _CHUNK):
-        e = min(s + _CHUNK + 1, n)
-        chunk = t[s:e]
-        if not np.all(np.isfinite(chunk)):
-            raise DatasetError(f"{path}: timestamps 't' hold NaN or inf")
-        d = np.diff(chunk)
-        if not np.all(d >= 0):
-            i = s + int(np.argmax(d < 0))
+        self.n_zero += nz
+        self.n_minus += nm
+        if self.n_zero and self.n_minus:
             raise DatasetError(
-                f"{path}: timestamps are not sorted ascending (t[{i}]={t[i]!r} > "
-                f"t[{i + 1}]={t[i + 1]!r})"
+                f"{self.path}: polarity holds -1, 0 and +1 values; expected either -1/+1 or 0/1"
             )
+        return chunk.astype(np.int8)
+
+
+class _TimeCheck:
+    """Per-chunk checks of ``t``: numeric, finite, non-decreasing across chunk borders."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.last = -np.inf
+        self.offset = 0
+
+    def __call__(self, chunk: np.ndarray) -> np.ndarray:
+        path = self.path
+        if not np.issubdtype(chunk.dtype, np.number) or chunk.dtype == np.bool_:
+            raise DatasetError(f"{path}: key 't' has dtype {chunk.dtype}, expected numbers")
+        out = chunk.astype(np.float64)
+        if not np.all(np.isfinite(out)):
+            raise DatasetError(f"{path}: timestamps 't' hold NaN or inf")
+        bad = np.diff(out) < 0
+        if out.shape[0] and out[0] < self.last:
+            i = self.offset - 1
+            raise DatasetError(
+                f"{path}: timestamps are not sorted ascending (t[{i}]={self.last!r} > "
+                f"t[{i + 1}]={out[0]!r})"
+            )
+        if np.any(bad):
+            j = int(np.argmax(bad))
+            i = self.offset + j
+            raise DatasetError(
+                f"{path}: timestamps are not sorted ascending (t[{i}]={out[j]!r} > "
+                f"t[{i + 1}]={out[j + 1]!r})"
+            )
+        if out.shape[0]:
+            self.last = out[-1]
+        self.offset += out.shape[0]
+        return out
+
+
+def _read_member(
+    zf: zipfile.ZipFile, key: str, path: Path, out_dtype: type, convert
+) -> np.ndarray:
+    """Stream one ``<key>.npy`` of the archive in chunks through ``convert`` into one array.
+
+    Only one raw chunk exists at a time, so a 30M-event int64 column never sits in memory
+    next to its int16 copy.
+    """
+    try:
+        with zf.open(f"{key}.npy") as f:
+            version = np.lib.format.read_magic(f)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(f)
+            elif version == (2, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(f)
+            else:
+                shape, dtype = None, None
+            if shape is not None:
+                if dtype.hasobject:
+                    raise DatasetError(
+                        f"{path}: key '{key}' holds Python objects (pickles are not loaded)"
+                    )
+                if len(shape) != 1 and not (len(shape) == 2 and 1 in shape):
+                    raise DatasetError(
+                        f"{path}: key '{key}' has shape {shape}, expected 1-D"
+                    )
+                n = int(np.prod(shape))
+                out = np.empty(n, dtype=out_dtype)
+                step = _CHUNK
+                for s in range(0, n, step):
+                    m = min(step, n - s)
+                    buf = f.read(m * dtype.itemsize)
+                    if len(buf) != m * dtype.itemsize:
+                        raise DatasetError(f"{path}: key '{key}' is truncated")
+                    out[s : s + m] = convert(np.frombuffer(buf, dtype=dtype))
+                return out
+    except DatasetError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
+        raise DatasetError(f"{path}: cannot read key '{key}' ({exc})") from None
+    # Rare .npy format versions: let numpy read the whole array, then convert in chunks.
+    try:
+        arr = np.load(path, allow_pickle=False)[key]
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise DatasetError(f"{path}: cannot read key '{key}' ({exc})") from None
+    if arr.ndim != 1 and not (arr.ndim == 2 and 1 in arr.shape):
+        raise DatasetError(f"{path}: key '{key}' has shape {arr.shape}, expected 1-D")
+    arr = arr.reshape(-1)
+    out = np.empty(arr.shape[0], dtype=out_dtype)
+    for s in range(0, arr.shape[0], _CHUNK):
+        out[s : s + _CHUNK] = convert(arr[s : s + _CHUNK])
+    return out
 
 
 def load_events(path: str | Path, width: int, height: int) -> EventStream:
     """Load and check one events npz.
+
+    Each key is streamed from the archive in chunks of 4M values, checked and converted to
+    its final dtype on the way, so peak memory stays near the size of the final arrays
+    (int16 x/y, float64 t, int8 p: 13 bytes per event).
 
     Args:
         path: the ``.npz`` file with keys ``x`` (column), ``y`` (row), ``t``, ``p``.
@@ -164,73 +242,54 @@ def load_events(path: str | Path, width: int, height: int) -> EventStream:
         height: image height; every ``y`` must be < height.
 
     Returns:
-        The :class:`EventStream`; arrays are converted once to int16/int16/float64/int8.
+        The :class:`EventStream`.
 
     Raises:
-        DatasetError: unreadable file, missing or extra keys, arrays of different lengths or
-            not 1-D, no events, unsorted or non-finite timestamps, pixels outside the image,
+        DatasetError: unreadable file, missing keys, arrays of different lengths or not
+            1-D, no events, unsorted or non-finite timestamps, pixels outside the image,
             polarity values other than -1/+1 or 0/1. The message names the file.
     """
     path = Path(path)
     try:
-        npz = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        zf = zipfile.ZipFile(path)
+    except (OSError, zipfile.BadZipFile, EOFError, ValueError) as exc:
         raise DatasetError(f"{path}: cannot read events npz ({exc})") from None
-    if not isinstance(npz, np.lib.npyio.NpzFile):
-        raise DatasetError(f"{path}: not an npz archive (expected keys x, y, t, p)")
-    with npz:
-        keys = set(npz.files)
+    with zf:
+        keys = {n[:-4] for n in zf.namelist() if n.endswith(".npy")}
         missing = [k for k in EVENT_KEYS if k not in keys]
-        extra = sorted(keys - set(EVENT_KEYS))
         if missing:
             raise DatasetError(
                 f"{path}: missing key(s) {', '.join(missing)} (found {sorted(keys)}; "
                 "expected x, y, t, p)"
             )
+        extra = sorted(keys - set(EVENT_KEYS))
         if extra:
             log.info("%s: ignoring extra keys %s", path, extra)
-
-        def read(key: str) -> np.ndarray:
-            try:
-                arr = npz[key]
-            except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-                raise DatasetError(f"{path}: cannot read key '{key}' ({exc})") from None
-            if arr.ndim != 1:
-                arr = arr.reshape(-1) if arr.ndim == 2 and 1 in arr.shape else arr
-            if arr.ndim != 1:
-                raise DatasetError(f"{path}: key '{key}' has shape {arr.shape}, expected 1-D")
-            return arr
-
-        # One key at a time, so the raw and converted copies of only one array coexist.
-        t = read("t")
-        n = t.shape[0]
+        x_check, y_check = _PixelCheck("x", path), _PixelCheck("y", path)
+        p_check = _PolarityCheck(path)
+        # The narrow columns first, t last: peak memory is the final arrays plus one chunk.
+        x = _read_member(zf, "x", path, np.int16, x_check)
+        n = x.shape[0]
         if n == 0:
             raise DatasetError(f"{path}: no events (empty arrays)")
-        if not np.issubdtype(t.dtype, np.number) or t.dtype == np.bool_:
-            raise DatasetError(f"{path}: key 't' has dtype {t.dtype}, expected numbers")
-        t = t.astype(np.float64, copy=False)
-        _check_sorted(t, path)
-        if t[-1] <= 0:
-            raise DatasetError(f"{path}: largest timestamp is {t[-1]!r}; expected > 0")
-        arrays = {}
-        for key in ("x", "y", "p"):
-            arr = read(key)
-            if arr.shape[0] != n:
-                raise DatasetError(
-                    f"{path}: key '{key}' has {arr.shape[0]} entries but 't' has {n}"
-                )
-            if key == "p":
-                arrays["p"], note = _as_polarity(arr, path)
-            else:
-                arrays[key] = _as_int16_pixels(arr, key, path)
-            del arr
-    x, y, p = arrays["x"], arrays["y"], arrays["p"]
-    if int(x.max()) >= width or int(y.max()) >= height:
+        y = _read_member(zf, "y", path, np.int16, y_check)
+        p = _read_member(zf, "p", path, np.int8, p_check)
+        t = _read_member(zf, "t", path, np.float64, _TimeCheck(path))
+    for key, arr in (("y", y), ("p", p), ("t", t)):
+        if arr.shape[0] != n:
+            raise DatasetError(f"{path}: key '{key}' has {arr.shape[0]} entries but 'x' has {n}")
+    if t[-1] <= 0:
+        raise DatasetError(f"{path}: largest timestamp is {t[-1]!r}; expected > 0")
+    if x_check.max >= width or y_check.max >= height:
         raise DatasetError(
-            f"{path}: pixels outside the image: max x={int(x.max())}, max y={int(y.max())} "
+            f"{path}: pixels outside the image: max x={x_check.max}, max y={y_check.max} "
             f"for a {width}x{height} image (x is the column, y the row; set the size with "
             "overrides width=..., height=...)"
         )
-    if note != "-1/+1":
+    note = "-1/+1"
+    if p_check.n_zero or p_check.boolean:
+        p *= 2
+        p -= 1
+        note = ("boolean " if p_check.boolean else "") + "0/1 (converted to -1/+1)"
         log.warning("%s: polarity stored as %s", path, note)
     return EventStream(x=x, y=y, t=t, p=p, path=path, polarity_note=note)

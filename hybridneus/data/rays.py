@@ -19,10 +19,10 @@ from scipy.spatial.transform import Rotation
 ArrayLike = np.ndarray | torch.Tensor
 
 
-def _as_f64(a: ArrayLike, device: torch.device) -> torch.Tensor:
+def _as_f64(a: ArrayLike) -> np.ndarray:
     if isinstance(a, torch.Tensor):
-        return a.to(device=device, dtype=torch.float64)
-    return torch.as_tensor(np.asarray(a), dtype=torch.float64, device=device)
+        return a.detach().cpu().numpy().astype(np.float64, copy=False)
+    return np.asarray(a, dtype=np.float64)
 
 
 def camera_rays(
@@ -46,37 +46,37 @@ def camera_rays(
         - dirs: (n_rays, 3) float32 unit directions in world coordinates.
 
     Note:
-        Computed in float64 and cast at the end; not meant to be differentiated (poses are
-        fixed inputs).
+        Computed in float64 numpy and cast at the end; not differentiable (poses are fixed
+        inputs).
     """
     if device is None:
         device = xy.device if isinstance(xy, torch.Tensor) else torch.device("cpu")
-    device = torch.device(device)
-    pix = _as_f64(xy, device).reshape(-1, 2) + 0.5
-    Kt = _as_f64(K, device)
-    Kinv = torch.linalg.inv(Kt)
-    ones = torch.ones_like(pix[:, :1])
-    uv1 = torch.cat([pix, ones], dim=-1)
+    pix = _as_f64(xy).reshape(-1, 2) + 0.5
+    Kinv = np.linalg.inv(_as_f64(K))
+    uv1 = np.concatenate([pix, np.ones_like(pix[:, :1])], axis=-1)
     if Kinv.ndim == 2:
         cam = uv1 @ Kinv.T
     else:
-        cam = torch.einsum("nij,nj->ni", Kinv, uv1)
-    cam = cam / cam[:, 2:3]
+        cam = np.einsum("nij,nj->ni", Kinv, uv1)
+    cam /= cam[:, 2:3]
     if distortion is not None:
-        d = _as_f64(distortion, device).reshape(-1, 2)
+        d = _as_f64(distortion).reshape(-1, 2)
         r2 = cam[:, 0] ** 2 + cam[:, 1] ** 2
         factor = 1.0 + d[:, 0] * r2 + d[:, 1] * r2 * r2
-        cam = torch.cat([cam[:, :2] / factor[:, None], cam[:, 2:]], dim=-1)
-    pose = _as_f64(c2w, device)
+        cam[:, :2] /= factor[:, None]
+    pose = _as_f64(c2w)
     rot = pose[..., :3, :3]
     if rot.ndim == 2:
         dirs = cam @ rot.T
-        origins = pose[:3, 3].expand(cam.shape[0], 3)
+        origins = np.broadcast_to(pose[:3, 3], (cam.shape[0], 3))
     else:
-        dirs = torch.einsum("nij,nj->ni", rot, cam)
+        dirs = np.einsum("nij,nj->ni", rot, cam)
         origins = pose[:, :3, 3]
-    dirs = dirs / torch.linalg.norm(dirs, dim=-1, keepdim=True)
-    return origins.to(torch.float32).contiguous(), dirs.to(torch.float32).contiguous()
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    return (
+        torch.as_tensor(np.ascontiguousarray(origins, dtype=np.float32), device=device),
+        torch.as_tensor(np.ascontiguousarray(dirs, dtype=np.float32), device=device),
+    )
 
 
 def near_far_unit_sphere(

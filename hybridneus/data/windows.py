@@ -124,9 +124,10 @@ def event_frame(
         column x, row y lands in ``E[y, x]``.
     """
     counter = _counter(split)
-    c = np.zeros((split.height * split.width, 2), dtype=np.int64)
+    c = None
     for i0, i1 in _index_ranges(split.events.t, t0, t1):
-        c += counter.counts(i0, i1)
+        part = counter.counts(i0, i1)
+        c = part if c is None else c + part
     frame = c[:, 1] * (1.0 + polarity_offset) + c[:, 0] * (polarity_offset - 1.0)
     return frame.astype(np.float32).reshape(split.height, split.width)
 
