@@ -1,0 +1,141 @@
+"""Library entry point: ``fit(dataset, config, callbacks) -> Field``.
+
+Example:
+    >>> import numpy as np, hybridneus.api as hn  # doctest: +SKIP
+    >>> field = hn.fit("data/real/multimeter", "fast")  # doctest: +SKIP
+    >>> field.sdf(np.zeros((1, 3), np.float32))  # numpy in, numpy out  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from hybridneus.config import Config, apply_overrides, preset_config
+from hybridneus.errors import ConfigError, RunError
+
+
+def _resolve_config(config: Config | str | None, overrides: Sequence[str]) -> Config:
+    if config is None:
+        cfg = preset_config("fast")
+    elif isinstance(config, str):
+        cfg = preset_config(config)
+    elif isinstance(config, Config):
+        import copy
+
+        cfg = copy.deepcopy(config)
+    else:
+        raise ConfigError(f"config: expected a Config, a preset name or None, got {type(config)}")
+    return apply_overrides(cfg, overrides)
+
+
+def load_training_data(cfg: Config, dataset: Any = None):
+    """Load ``dataset`` (path or EventDataset) with the config's preset overrides."""
+    from hybridneus.data import EventDataset, load_dataset
+    from hybridneus.data import apply_overrides as preset_overrides
+
+    if isinstance(dataset, EventDataset):
+        if cfg.data.overrides():
+            dataset.preset = preset_overrides(dataset.preset, cfg.data.overrides())
+        if not cfg.data.path:
+            cfg.data.path = str(dataset.root)
+        return dataset
+    path = dataset if dataset is not None else cfg.data.path
+    if not path:
+        raise ConfigError("data.path: no dataset given")
+    cfg.data.path = str(Path(path).resolve())
+    return load_dataset(path, overrides=cfg.data.overrides() or None, splits=cfg.data.split)
+
+
+def fit(
+    dataset: Any,
+    config: Config | str | None = None,
+    callbacks: Iterable = (),
+    *,
+    overrides: Sequence[str] = (),
+    out: str | os.PathLike | None = None,
+    resume: str | os.PathLike | None = None,
+    device: str = "auto",
+    progress: bool = False,
+):
+    """Train a hybrid NeuS field from an event dataset and return it.
+
+    Args:
+        dataset: dataset folder (EventNeRF layout) or a loaded
+            :class:`hybridneus.data.EventDataset`; ignored when resuming (the run's
+            ``data.path`` is used) unless given.
+        config: a :class:`~hybridneus.config.Config`, a preset name (``fast``, ``quality``,
+            ``eventneus``) or ``None`` (``fast``).
+        callbacks: callables ``callback(trainer, logs)`` run after every step; raising
+            ``KeyboardInterrupt`` stops training with a checkpoint.
+        overrides: ``"section.key=value"`` strings applied on top of ``config``.
+        out: runs root; a run folder ``<out>/<scene>-<timestamp>`` gets the config,
+            checkpoints, metrics and previews. ``None`` writes nothing.
+        resume: a run folder to continue from its last checkpoint (identical state).
+        device: ``auto``, ``cpu``, ``cuda``.
+        progress: show a progress bar on stderr.
+
+    Returns:
+        The trained :class:`~hybridneus.model.field.HybridField` (a ``Field``); its
+        ``sdf(points)`` / ``color(points, dirs)`` take numpy or torch. ``field.run_dir`` is
+        the run folder (or ``None``) and ``field.interrupted`` says whether training stopped
+        early on KeyboardInterrupt.
+
+    Raises:
+        ConfigError: bad config or override. DatasetError: bad dataset. RunError: bad resume.
+    """
+    trainer, logger = prepare(dataset, config, overrides, out, resume, device)
+    field = trainer.fit(callbacks, logger, progress=progress)
+    field.run_dir = logger.run_dir if logger is not None else None
+    field.interrupted = trainer.interrupted
+    field.trainer_step = trainer.step
+    return field
+
+
+def prepare(
+    dataset: Any,
+    config: Config | str | None,
+    overrides: Sequence[str] = (),
+    out: str | os.PathLike | None = None,
+    resume: str | os.PathLike | None = None,
+    device: str = "auto",
+):
+    """Build the :class:`~hybridneus.training.trainer.Trainer` and run logger of a fit."""
+    from hybridneus.device import resolve_device
+    from hybridneus.training import runs
+    from hybridneus.training.runlog import RunLogger
+    from hybridneus.training.trainer import Trainer, default_scene_name
+
+    dev = resolve_device(device)
+    state = None
+    if resume is not None:
+        run_dir = Path(resume)
+        state = runs.load_checkpoint(run_dir)
+        cfg = runs.load_run_config(run_dir)
+        cfg = apply_overrides(cfg, overrides)
+        if config is not None and not isinstance(config, str | Config):
+            raise ConfigError("config: expected a Config or a preset name")
+        data = load_training_data(cfg, dataset)
+        trainer = Trainer(cfg, data, dev)
+        try:
+            trainer.load_state_dict(state)
+        except (RuntimeError, KeyError, ValueError) as exc:
+            first = (str(exc).splitlines() or [type(exc).__name__])[0]
+            raise RunError(f"{run_dir / runs.CHECKPOINT}: cannot resume ({first})") from None
+        if cfg.train.iters != state["config"]["train"]["iters"]:
+            trainer.total_steps = max(trainer.step + 1, cfg.train.iters)
+        runs_root = run_dir.parent
+        logger = RunLogger(run_dir, runs_root, resume_step=trainer.step)
+        logger.start(trainer)
+        return trainer, logger
+    cfg = _resolve_config(config, overrides)
+    data = load_training_data(cfg, dataset)
+    trainer = Trainer(cfg, data, dev)
+    logger = None
+    if out is not None:
+        run_dir = runs.new_run_dir(out, default_scene_name(data.root))
+        logger = RunLogger(run_dir, Path(out))
+        logger.start(trainer)
+    return trainer, logger

@@ -1,0 +1,139 @@
+"""What a training run writes: config, checkpoints, metrics.csv, TensorBoard, previews."""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from pathlib import Path
+from typing import Any
+
+from hybridneus.config import save_config
+from hybridneus.fileio import atomic_path
+from hybridneus.training import runs
+
+_FIXED = ["step", "elapsed_s", "loss/total", "loss/event", "loss/eikonal"]
+
+
+class RunLogger:
+    """Writes one run folder (see :mod:`hybridneus.training.runs` for the layout).
+
+    Args:
+        run_dir: the run folder (created by :func:`runs.new_run_dir`).
+        runs_root: folder holding the ``latest`` pointer.
+        resume_step: when resuming, rows of ``metrics.csv`` after this step are dropped.
+    """
+
+    def __init__(self, run_dir: Path, runs_root: Path | None, resume_step: int = 0) -> None:
+        self.run_dir = Path(run_dir)
+        self.runs_root = Path(runs_root) if runs_root is not None else None
+        self.metrics_path = self.run_dir / "metrics.csv"
+        self.history: list[dict[str, float]] = []
+        self.columns: list[str] | None = None
+        self._load_metrics(resume_step)
+        self.tb = _tensorboard_writer(self.run_dir / "tb")
+
+    def _load_metrics(self, resume_step: int) -> None:
+        if not self.metrics_path.is_file():
+            return
+        with open(self.metrics_path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        for row in rows:
+            try:
+                values = {k: float(v) for k, v in row.items() if v not in ("", None)}
+            except ValueError:
+                continue
+            if values.get("step", 0) <= resume_step:
+                self.history.append(values)
+        if rows:
+            self.columns = list(rows[0].keys())
+        self._rewrite_metrics()
+
+    def _rewrite_metrics(self) -> None:
+        if self.columns is None:
+            return
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=self.columns, extrasaction="ignore")
+        writer.writeheader()
+        for row in self.history:
+            writer.writerow({k: _fmt(row.get(k)) for k in self.columns})
+        with atomic_path(self.metrics_path) as tmp:
+            tmp.write_text(buf.getvalue())
+
+    def start(self, trainer) -> None:
+        """Write ``config.yaml`` and point ``latest`` at this run."""
+        save_config(trainer.cfg, self.run_dir / "config.yaml")
+        if self.runs_root is not None:
+            runs.set_latest(self.runs_root, self.run_dir)
+
+    def after_step(self, trainer, logs: dict[str, float]) -> None:
+        """Log metrics, write previews and checkpoints on their schedules."""
+        t = trainer.cfg.train
+        step = trainer.step
+        if step % max(t.log_every, 1) == 0 or step == 1:
+            row = {"step": float(step), "elapsed_s": trainer.elapsed, **logs}
+            self._append(row)
+            if self.tb is not None:
+                for key, value in logs.items():
+                    self.tb.add_scalar(key, value, step)
+        if t.preview_every > 0 and step % t.preview_every == 0:
+            self.preview(trainer)
+        if t.checkpoint_every > 0 and step % t.checkpoint_every == 0:
+            self.checkpoint(trainer)
+
+    def _append(self, row: dict[str, float]) -> None:
+        self.history.append(row)
+        if self.columns is None:
+            self.columns = _FIXED + sorted(k for k in row if k not in _FIXED)
+            new = True
+        else:
+            new = False
+        extra = [k for k in row if k not in self.columns]
+        if extra:
+            self.columns += sorted(extra)
+            self._rewrite_metrics()
+            return
+        with open(self.metrics_path, "a", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=self.columns, extrasaction="ignore")
+            if new or os.path.getsize(self.metrics_path) == 0:
+                writer.writeheader()
+            writer.writerow({k: _fmt(row.get(k)) for k in self.columns})
+
+    def checkpoint(self, trainer) -> Path:
+        """Save the trainer's full state atomically."""
+        return runs.save_checkpoint(self.run_dir, trainer.state_dict())
+
+    def preview(self, trainer) -> None:
+        """Write ``previews/step_<n>.png`` and ``previews/curve.png``."""
+        from hybridneus.training.previews import write_curve, write_preview
+
+        write_preview(trainer, self.run_dir / "previews" / f"step_{trainer.step:07d}.png")
+        write_curve(self.history, self.run_dir / "previews" / "curve.png")
+
+    def finish(self, trainer) -> None:
+        """Final checkpoint, curve and (if any) preview; close TensorBoard."""
+        self.checkpoint(trainer)
+        if self.history:
+            from hybridneus.training.previews import write_curve
+
+            write_curve(self.history, self.run_dir / "previews" / "curve.png")
+        if self.tb is not None:
+            self.tb.flush()
+            self.tb.close()
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return ""
+    if float(value).is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return f"{value:.6g}"
+
+
+def _tensorboard_writer(path: Path):
+    """A SummaryWriter when ``tensorboard`` is installed, else ``None`` (optional extra)."""
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except Exception:  # ImportError, or a broken optional install: logging is optional
+        return None
+    return SummaryWriter(str(path))

@@ -1,0 +1,153 @@
+"""Run folders: naming, checkpoints, the ``latest`` pointer, and loading a trained field.
+
+A run folder ``runs/<scene>-<YYYYmmdd-HHMMSS>`` holds ``config.yaml`` (the resolved
+configuration), ``checkpoints/last.pt``, ``metrics.csv``, ``previews/`` and, when TensorBoard
+is installed, ``tb/``. ``runs/latest`` is a one-line text file naming the newest run folder.
+Checkpoints are written atomically and hold only tensors and primitive containers, so they
+load with ``torch.load(..., weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from hybridneus.config import Config, load_config
+from hybridneus.errors import ConfigError, RunError
+from hybridneus.fileio import atomic_path
+
+CHECKPOINT = Path("checkpoints") / "last.pt"
+LATEST = "latest"
+
+
+def new_run_dir(runs_root: str | os.PathLike, scene: str) -> Path:
+    """Create and return a fresh ``<runs_root>/<scene>-<timestamp>`` folder."""
+    root = Path(runs_root)
+    root.mkdir(parents=True, exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in scene) or "run"
+    run = root / f"{safe}-{stamp}"
+    suffix = 1
+    while run.exists():
+        suffix += 1
+        run = root / f"{safe}-{stamp}-{suffix}"
+    run.mkdir()
+    return run
+
+
+def set_latest(runs_root: str | os.PathLike, run_dir: str | os.PathLike) -> None:
+    """Point ``<runs_root>/latest`` at ``run_dir`` (a text file with the folder name)."""
+    root = Path(runs_root)
+    with atomic_path(root / LATEST, suffix="") as tmp:
+        tmp.write_text(Path(run_dir).name + "\n")
+
+
+def latest_run(runs_root: str | os.PathLike = "runs") -> Path:
+    """The run folder named by ``<runs_root>/latest``, else the newest one with a checkpoint.
+
+    Raises:
+        RunError: no run folder with a checkpoint exists under ``runs_root``.
+    """
+    root = Path(runs_root)
+    pointer = root / LATEST
+    if pointer.is_file():
+        name = pointer.read_text().strip()
+        candidate = root / name
+        if name and (candidate / CHECKPOINT).is_file():
+            return candidate
+    runs = [p for p in root.glob("*") if (p / CHECKPOINT).is_file()] if root.is_dir() else []
+    if not runs:
+        raise RunError(f"{root}: no run with a checkpoint found; train one with `hybridneus fit`")
+    return max(runs, key=lambda p: (p / CHECKPOINT).stat().st_mtime)
+
+
+def save_checkpoint(run_dir: str | os.PathLike, state: dict[str, Any]) -> Path:
+    """Write ``state`` to ``<run_dir>/checkpoints/last.pt`` atomically; return the path."""
+    path = Path(run_dir) / CHECKPOINT
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
+    return path
+
+
+def load_checkpoint(run_dir: str | os.PathLike, map_location: Any = "cpu") -> dict[str, Any]:
+    """Read ``<run_dir>/checkpoints/last.pt`` with ``weights_only=True``.
+
+    Raises:
+        RunError: the folder or checkpoint is missing or unreadable.
+    """
+    run_dir = Path(run_dir)
+    path = run_dir / CHECKPOINT
+    if not run_dir.is_dir():
+        raise RunError(f"{run_dir}: run folder does not exist")
+    if not path.is_file():
+        raise RunError(f"{path}: checkpoint missing (the run was never saved)")
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt files
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise RunError(f"{path}: cannot read checkpoint ({first})") from None
+    if not isinstance(state, dict) or "model" not in state:
+        raise RunError(f"{path}: not a hybridneus checkpoint")
+    return state
+
+
+def load_run_config(run_dir: str | os.PathLike) -> Config:
+    """The resolved :class:`Config` saved in ``<run_dir>/config.yaml``.
+
+    Raises:
+        RunError: the file is missing. ConfigError: it does not parse.
+    """
+    path = Path(run_dir) / "config.yaml"
+    if not path.is_file():
+        raise RunError(f"{path}: config missing")
+    return load_config(path)
+
+
+def build_field(cfg: Config, scene: dict[str, Any]):
+    """A fresh field for ``cfg`` and the scene values saved in a checkpoint."""
+    from hybridneus.model.field import HybridField
+
+    return HybridField(
+        cfg.grid,
+        cfg.field,
+        background=tuple(scene["background"]),
+        crop=tuple(scene["crop"]),
+    )
+
+
+def load_field(run_dir: str | os.PathLike, device: str = "auto"):
+    """Load the trained field of a run folder, in eval mode, on ``device``.
+
+    Args:
+        run_dir: a run folder (or a runs root holding a ``latest`` pointer).
+        device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
+
+    Returns:
+        The :class:`~hybridneus.model.field.HybridField` (implements ``Field``).
+
+    Raises:
+        RunError: missing or unreadable run folder / checkpoint.
+    """
+    from hybridneus.device import resolve_device
+
+    run_dir = Path(run_dir)
+    if not (run_dir / CHECKPOINT).is_file() and (run_dir / LATEST).is_file():
+        run_dir = latest_run(run_dir)
+    dev = resolve_device(device)
+    state = load_checkpoint(run_dir)
+    try:
+        cfg = load_run_config(run_dir)
+    except ConfigError as exc:
+        raise RunError(str(exc)) from None
+    field = build_field(cfg, state["scene"])
+    try:
+        field.load_state_dict(state["model"])
+    except RuntimeError as exc:
+        first = str(exc).splitlines()[0]
+        raise RunError(f"{run_dir / CHECKPOINT}: does not match config.yaml ({first})") from None
+    field.update_step(int(state["step"]), int(state["total_steps"]))
+    return field.to(dev).eval()

@@ -1,0 +1,325 @@
+"""The training loop: event batches -> NeuS renders at both window ends -> losses -> Adam.
+
+One :class:`Trainer` owns the field, the samplers, the optimiser and every random state, so
+``state_dict()`` / ``load_state_dict()`` resume a run exactly (same step, same parameters,
+same optimiser moments, same random draws).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from hybridneus.config import Config
+from hybridneus.model.field import HybridField, crop_aabb
+from hybridneus.rendering.occupancy import OccupancyGrid
+from hybridneus.rendering.renderer import render_rays
+from hybridneus.rendering.sampling import NeuSSampler
+from hybridneus.training import losses as L
+
+Callback = Callable[["Trainer", dict[str, float]], None]
+
+# Steps after which a --minutes budget re-estimates the total number of steps.
+_ESTIMATE_AT = (10, 30, 100)
+_ESTIMATE_EVERY = 100
+
+
+def lr_factor(step: int, total: int, warmup: int, decay_start: float, decay_final: float) -> float:
+    """Learning-rate multiplier: linear warm-up, constant, then exponential decay.
+
+    Args:
+        step: current step (0-based).
+        total: total steps.
+        warmup: warm-up steps.
+        decay_start: fraction of ``total`` after which the decay starts.
+        decay_final: multiplier reached at ``total``.
+    """
+    f = min(1.0, (step + 1) / warmup) if warmup > 0 else 1.0
+    progress = step / max(total, 1)
+    if progress > decay_start and decay_start < 1.0:
+        f *= decay_final ** min(1.0, (progress - decay_start) / (1.0 - decay_start))
+    return f
+
+
+def _make_adam(groups: list[dict[str, Any]], cfg: Config) -> torch.optim.Adam:
+    kwargs = dict(betas=tuple(cfg.train.betas), eps=cfg.train.adam_eps)
+    try:
+        return torch.optim.Adam(groups, fused=True, **kwargs)
+    except (RuntimeError, TypeError, ValueError):
+        return torch.optim.Adam(groups, **kwargs)
+
+
+class Trainer:
+    """Event-supervised training of a :class:`HybridField` on one dataset split.
+
+    Args:
+        cfg: the full configuration.
+        dataset: an :class:`hybridneus.data.EventDataset` (preset already resolved).
+        device: torch device.
+
+    Attributes:
+        field: the model being trained.
+        step: completed steps.
+        total_steps: the schedule length (re-estimated under a time budget).
+        interrupted: set when :meth:`fit` stopped on KeyboardInterrupt.
+    """
+
+    def __init__(self, cfg: Config, dataset, device: torch.device | str = "cpu") -> None:
+        from hybridneus.data import EventWindowSampler
+
+        self.cfg = cfg
+        self.device = torch.device(device)
+        self.dataset = dataset
+        if cfg.data.split not in dataset.splits:
+            from hybridneus.errors import ConfigError
+
+            raise ConfigError(
+                f"data.split: {dataset.root} has no split {cfg.data.split!r}; "
+                f"found {sorted(dataset.splits)}"
+            )
+        self.split = dataset.splits[cfg.data.split]
+        self.preset = dataset.preset
+        if cfg.train.threads > 0:
+            torch.set_num_threads(cfg.train.threads)
+        torch.manual_seed(cfg.train.seed)
+        p = self.preset
+        self.scene = {
+            "background": [float(c) for c in p.background],
+            "crop": [float(p.crop_r), float(p.crop_y_min), float(p.crop_y_max)],
+            "tonemap_eps": float(p.tonemap_eps),
+        }
+        self.field = HybridField(
+            cfg.grid, cfg.field, tuple(self.scene["background"]), tuple(self.scene["crop"])
+        ).to(self.device)
+        aabb = crop_aabb(self.field.crop.cpu()).to(self.device)
+        self.aabb = aabb
+        r = cfg.render
+        self.occupancy = OccupancyGrid(aabb, r.occupancy_resolution).to(self.device)
+        self.sampler = NeuSSampler(
+            aabb,
+            n_coarse=r.n_coarse,
+            n_importance=r.n_importance,
+            up_rounds=r.up_rounds,
+            up_base_inv_s=r.up_base_inv_s,
+            occupancy=self.occupancy if r.occupancy else None,
+            n_march=r.occupancy_march,
+            near_min=r.near_min,
+            chunk=r.chunk,
+        )
+        self.windows = EventWindowSampler(
+            self.split, self.preset, seed=cfg.train.seed, window=cfg.train.window,
+            device=self.device,
+        )
+        self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
+        variance = [self.field.variance]
+        others = [q for name, q in self.field.named_parameters() if name != "variance"]
+        self.optimizer = _make_adam(
+            [
+                {"params": others, "lr": cfg.train.lr, "name": "field"},
+                {"params": variance, "lr": cfg.train.lr_variance, "name": "variance"},
+            ],
+            cfg,
+        )
+        self.base_lrs = [cfg.train.lr, cfg.train.lr_variance]
+        self.step = 0
+        self.total_steps = max(1, cfg.train.iters)
+        self.elapsed = 0.0
+        self.interrupted = False
+        self.occupied_fraction = 1.0
+        self.time_budget = cfg.train.minutes * 60.0 if cfg.train.minutes > 0 else None
+
+    # ------------------------------------------------------------------ state
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to resume: tensors and primitive containers only."""
+        rng = self.windows.rng.bit_generator.state
+        return {
+            "version": 1,
+            "step": self.step,
+            "total_steps": self.total_steps,
+            "elapsed": self.elapsed,
+            "model": self.field.state_dict(),
+            "occupancy": self.occupancy.occupied.clone(),
+            "optimizer": self.optimizer.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+            "generator": self.generator.get_state(),
+            "window_rng": _to_primitive(rng),
+            "scene": dict(self.scene),
+            "config": self.cfg.to_dict(),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state written by :meth:`state_dict`."""
+        self.field.load_state_dict(state["model"])
+        self.occupancy.occupied.copy_(state["occupancy"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        torch.set_rng_state(state["torch_rng"])
+        self.generator.set_state(state["generator"])
+        self.windows.rng.bit_generator.state = state["window_rng"]
+        self.step = int(state["step"])
+        self.total_steps = int(state["total_steps"])
+        self.elapsed = float(state.get("elapsed", 0.0))
+        self.field.update_step(self.step, self.total_steps)
+
+    # ------------------------------------------------------------------ one step
+
+    def _schedules(self) -> float:
+        t = self.cfg.train
+        factor = lr_factor(self.step, self.total_steps, t.warmup, t.decay_start, t.decay_final)
+        for group, base in zip(self.optimizer.param_groups, self.base_lrs, strict=True):
+            group["lr"] = base * factor
+        self.field.update_step(self.step, self.total_steps)
+        anneal_at = self.cfg.render.cos_anneal_at * self.total_steps
+        self.field.cos_anneal = 1.0 if anneal_at <= 0 else min(1.0, self.step / anneal_at)
+        return factor
+
+    def _random_points(self, n: int) -> torch.Tensor:
+        u = torch.rand((n, 3), generator=self.generator, device=self.device)
+        return self.aabb[:3] + u * (self.aabb[3:] - self.aabb[:3])
+
+    def train_step(self) -> dict[str, float]:
+        """Run one optimisation step; return the logged scalars."""
+        cfg = self.cfg
+        t_start = time.perf_counter()
+        factor = self._schedules()
+        r = cfg.render
+        if r.occupancy and self.step % max(r.occupancy_every, 1) == 0:
+            self.occupied_fraction = self.occupancy.update(
+                self.field.raw_sdf, float(self.field.inv_s().detach()), r.occupancy_band, r.chunk
+            )
+        batch = self.windows.sample(cfg.train.n_rays).to(self.device)
+        n = batch.target.shape[0]
+        origins = torch.cat([batch.origins0, batch.origins1])
+        dirs = torch.cat([batch.dirs0, batch.dirs1])
+        out = render_rays(
+            self.field, origins, dirs, self.sampler, self.generator, True, r.crop_softness
+        )
+        c0, c1 = out.color[:n], out.color[n:]
+        lw = cfg.loss
+        terms: dict[str, torch.Tensor] = {}
+        terms["event"] = L.event_loss(c0, c1, batch.target, batch.bayer, self.scene["tonemap_eps"])
+        need_random = lw.n_random_points > 0 and (
+            lw.lambda_eikonal > 0 or lw.lambda_curvature > 0 or lw.lambda_sparsity > 0
+        )
+        grads = [out.gradients]
+        if need_random:
+            pts = self._random_points(lw.n_random_points)
+            sdf_r, grad_r, _ = self.field.sdf_gradient_features(pts, create_graph=True)
+            grads.append(grad_r)
+            if lw.lambda_curvature > 0:
+                offset = torch.randn(pts.shape, generator=self.generator, device=self.device)
+                shifted = pts + lw.curvature_step * torch.nn.functional.normalize(offset, dim=-1)
+                _, grad_s, _ = self.field.sdf_gradient_features(shifted, create_graph=True)
+                terms["curvature"] = L.curvature_loss(grad_r, grad_s)
+            if lw.lambda_sparsity > 0:
+                terms["sparsity"] = L.sparsity_loss(sdf_r, lw.sparsity_tau)
+        if lw.lambda_eikonal > 0:
+            terms["eikonal"] = L.eikonal_loss(torch.cat(grads))
+        total = sum(getattr(lw, f"lambda_{name}") * value for name, value in terms.items())
+        self.optimizer.zero_grad(set_to_none=True)
+        total.backward()
+        self.optimizer.step()
+        self.step += 1
+        seconds = time.perf_counter() - t_start
+        self.elapsed += seconds
+        logs = {f"loss/{k}": float(v) for k, v in terms.items()}
+        logs.update(
+            {
+                "loss/total": float(total),
+                "inv_s": float(self.field.inv_s()),
+                "lr": cfg.train.lr * factor,
+                "levels": float(self.field.active_levels()),
+                "occupied": self.occupied_fraction,
+                "opacity": float(out.opacity.mean()),
+                "step_seconds": seconds,
+            }
+        )
+        return logs
+
+    def _maybe_reestimate(self, start_wall: float, start_step: int) -> None:
+        if self.time_budget is None:
+            return
+        done = self.step - start_step
+        if done in _ESTIMATE_AT or (done > 0 and done % _ESTIMATE_EVERY == 0):
+            per_step = (time.perf_counter() - start_wall) / max(done, 1)
+            remaining = self.time_budget - self.elapsed
+            estimate = self.step + max(0, int(remaining / max(per_step, 1e-6)))
+            self.total_steps = max(self.step + 1, min(self.cfg.train.iters, estimate))
+
+    # ------------------------------------------------------------------ loop
+
+    def fit(
+        self,
+        callbacks: Iterable[Callback] = (),
+        run=None,
+        progress: bool = True,
+    ) -> HybridField:
+        """Train until ``total_steps`` or the time budget; return the field.
+
+        Args:
+            callbacks: called as ``callback(trainer, logs)`` after every step.
+            run: a :class:`~hybridneus.training.logging.RunLogger` (checkpoints, metrics,
+                previews), or ``None`` for no files.
+            progress: show a rich progress bar on stderr.
+
+        A ``KeyboardInterrupt`` (Ctrl-C, or raised by a callback) saves a checkpoint at the
+        last completed step, sets :attr:`interrupted` and returns the field.
+        """
+        from hybridneus.progress import make_progress
+
+        callbacks = list(callbacks)
+        start_wall, start_step = time.perf_counter(), self.step
+        with make_progress("it", disable=not progress) as bar:
+            task = bar.add_task("fit", total=self.total_steps, completed=self.step)
+            try:
+                while self.step < self.total_steps:
+                    if self.time_budget is not None and self.elapsed >= self.time_budget:
+                        break
+                    logs = self.train_step()
+                    self._maybe_reestimate(start_wall, start_step)
+                    if run is not None:
+                        run.after_step(self, logs)
+                    for cb in callbacks:
+                        cb(self, logs)
+                    bar.update(
+                        task,
+                        completed=self.step,
+                        total=self.total_steps,
+                        info=f"loss {logs['loss/total']:.4g} ev {logs['loss/event']:.4g} "
+                        f"inv_s {logs['inv_s']:.0f} lv {int(logs['levels'])}",
+                    )
+                    if not math.isfinite(logs["loss/total"]):
+                        from hybridneus.errors import RunError
+
+                        raise RunError(
+                            f"training diverged at step {self.step} (loss {logs['loss/total']});"
+                            " lower train.lr or check data.threshold"
+                        )
+            except KeyboardInterrupt:
+                self.interrupted = True
+        if run is not None:
+            run.finish(self)
+        self.field.eval()
+        return self.field
+
+
+def _to_primitive(value: Any) -> Any:
+    """numpy scalars/arrays inside a bit-generator state -> Python ints/lists."""
+    if isinstance(value, dict):
+        return {k: _to_primitive(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def default_scene_name(path: str | Path) -> str:
+    """Run-folder prefix from a dataset path (its last component)."""
+    return Path(path).resolve().name or "scene"
