@@ -138,3 +138,10 @@ def test_rgb_absent_and_distortion(tmp_path):
     tr = ds.splits["train"]
     assert tr.rgb_paths is None
     np.testing.assert_allclose(tr.distortion, [[0.1, -0.02]] * tr.n_views)
+
+
+def test_public_names_resolve():
+    import hybridneus.data as data
+
+    for name in data.__all__:
+        assert getattr(data, name) is not None, name

@@ -1,9 +1,14 @@
 """Reading EventNeRF-layout datasets: presets, splits, event windows and ray batches.
 
-See docs/data.md for the layout, the presets and every convention.
+See docs/data.md for the layout, the presets and every convention. Loading needs only numpy;
+the torch-based names (rays, windows) are imported on first use so that ``hybridneus info``
+starts without importing torch.
 """
 
 from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from hybridneus.data.dataset import EventDataset, SplitData, load_dataset, load_split
 from hybridneus.data.events import EventStream, load_events
@@ -15,14 +20,37 @@ from hybridneus.data.presets import (
     preset_for_scene,
     resolve_preset,
 )
-from hybridneus.data.rays import camera_rays, interpolate_pose, near_far_unit_sphere
-from hybridneus.data.windows import (
-    EventCounter,
-    EventWindowSampler,
-    RayBatch,
-    bayer_mask,
-    event_frame,
-)
+
+if TYPE_CHECKING:
+    from hybridneus.data.rays import camera_rays, interpolate_pose, near_far_unit_sphere
+    from hybridneus.data.windows import (
+        EventCounter,
+        EventWindowSampler,
+        RayBatch,
+        bayer_mask,
+        event_frame,
+    )
+
+_LAZY = {
+    "camera_rays": "rays",
+    "interpolate_pose": "rays",
+    "near_far_unit_sphere": "rays",
+    "EventCounter": "windows",
+    "EventWindowSampler": "windows",
+    "RayBatch": "windows",
+    "bayer_mask": "windows",
+    "event_frame": "windows",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'hybridneus.data' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"hybridneus.data.{module}"), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "EventCounter",

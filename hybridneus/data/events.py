@@ -100,10 +100,12 @@ class _PixelCheck:
         lo, hi = chunk.min(), chunk.max()
         if lo < 0:
             raise DatasetError(
-                f"{path}: pixels outside the image: {key} has negative values (min {lo})"
+                f"{path}: pixels outside the image: {key} has negative values (min {int(lo)})"
             )
         if hi > np.iinfo(np.int16).max:
-            raise DatasetError(f"{path}: pixels outside the image: {key} max {hi} is too large")
+            raise DatasetError(
+                f"{path}: pixels outside the image: {key} max {int(hi)} is too large"
+            )
         self.max = max(self.max, int(hi))
         return chunk.astype(np.int16)
 
@@ -159,15 +161,15 @@ class _TimeCheck:
         if out.shape[0] and out[0] < self.last:
             i = self.offset - 1
             raise DatasetError(
-                f"{path}: timestamps are not sorted ascending (t[{i}]={self.last!r} > "
-                f"t[{i + 1}]={out[0]!r})"
+                f"{path}: timestamps are not sorted ascending (t[{i}]={float(self.last)} > "
+                f"t[{i + 1}]={float(out[0])})"
             )
         if np.any(bad):
             j = int(np.argmax(bad))
             i = self.offset + j
             raise DatasetError(
-                f"{path}: timestamps are not sorted ascending (t[{i}]={out[j]!r} > "
-                f"t[{i + 1}]={out[j + 1]!r})"
+                f"{path}: timestamps are not sorted ascending (t[{i}]={float(out[j])} > "
+                f"t[{i + 1}]={float(out[j + 1])})"
             )
         if out.shape[0]:
             self.last = out[-1]
@@ -279,7 +281,7 @@ def load_events(path: str | Path, width: int, height: int) -> EventStream:
         if arr.shape[0] != n:
             raise DatasetError(f"{path}: key '{key}' has {arr.shape[0]} entries but 'x' has {n}")
     if t[-1] <= 0:
-        raise DatasetError(f"{path}: largest timestamp is {t[-1]!r}; expected > 0")
+        raise DatasetError(f"{path}: largest timestamp is {float(t[-1])}; expected > 0")
     if x_check.max >= width or y_check.max >= height:
         raise DatasetError(
             f"{path}: pixels outside the image: max x={x_check.max}, max y={y_check.max} "
