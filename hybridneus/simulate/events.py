@@ -198,7 +198,10 @@ class EventSimulator:
             # j = 1..n within each pixel, without a Python loop over pixels.
             j = np.arange(rep.size) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
             level = ref[rep] + sign * j * step_c[rep]
-            tau = (level - prev[rep]) / (cur[rep] - prev[rep])
+            denom = cur[rep] - prev[rep]
+            # denom == 0 only when float rounding left a crossing exactly at the old level
+            safe = np.where(denom != 0, denom, 1.0)
+            tau = np.where(denom != 0, (level - prev[rep]) / safe, 1.0)
             pix_parts.append(rep)
             t_parts.append((k - 1) + np.clip(tau, 1e-9, 1.0))
             p_parts.append(np.full(rep.size, sign, np.int8))
