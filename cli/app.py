@@ -25,6 +25,7 @@ app = typer.Typer(
 _COMMANDS: list[tuple[str, str, str]] = [
     ("info", "info", "info"),
     ("preview", "preview", "preview"),
+    ("simulate", "simulate", "simulate"),
 ]
 
 for _name, _module, _func in _COMMANDS:
