@@ -1,1 +1,52 @@
-"""hybridneus.evaluation."""
+"""Metrics: Chamfer distance / F-score and SDF-MAE between meshes, PSNR / SSIM of images.
+
+Public API::
+
+    from hybridneus.evaluation import chamfer_distance, sdf_mae, color_corrected_psnr_ssim
+
+See docs/evaluation.md for the exact protocols.
+"""
+
+from hybridneus.evaluation.geometry import (
+    ChamferResult,
+    SdfMaeResult,
+    chamfer_distance,
+    normalize_pair,
+    sdf_mae,
+    unit_cube_transform,
+)
+from hybridneus.evaluation.images import (
+    ImageMetrics,
+    apply_log_color_correction,
+    color_corrected_psnr_ssim,
+    fit_log_color_correction,
+    psnr,
+    ssim,
+)
+from hybridneus.evaluation.inside import (
+    inside_mask,
+    signed_distance,
+    unsigned_distance,
+    winding_number,
+    winding_number_exact,
+)
+
+__all__ = [
+    "ChamferResult",
+    "ImageMetrics",
+    "SdfMaeResult",
+    "apply_log_color_correction",
+    "chamfer_distance",
+    "color_corrected_psnr_ssim",
+    "fit_log_color_correction",
+    "inside_mask",
+    "normalize_pair",
+    "psnr",
+    "sdf_mae",
+    "signed_distance",
+    "ssim",
+    "unit_cube_transform",
+    "unsigned_distance",
+    "winding_number",
+    "winding_number_exact",
+]

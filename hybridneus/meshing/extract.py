@@ -151,8 +151,9 @@ def extract_sdf_mesh(
     Args:
         field_: any :class:`~hybridneus.model.protocol.Field`.
         res: grid points along the longest side of the volume (voxel = side / (res - 1)).
-        bounds: world box ((x0, y0, z0), (x1, y1, z1)); default [-1, 1]^3, or ``crop``'s box.
-        crop: crop cylinder whose bounding box is meshed when ``bounds`` is not given.
+        bounds: world box ((x0, y0, z0), (x1, y1, z1)); default [-1, 1]^3, or ``crop``'s box
+            (grown by 2% and cut to [-1, 1]^3, so surfaces on the crop are closed).
+        crop: crop cylinder whose box is meshed when ``bounds`` is not given.
         chunk: points per field query (bounds peak memory of the field).
         narrow_band: evaluate only blocks near the zero level (see module docstring).
         coarse_factor: fine voxels per coarse block side; default 4 (8 above res 512).
@@ -169,7 +170,7 @@ def extract_sdf_mesh(
     from skimage.measure import marching_cubes
 
     if bounds is None:
-        bounds = crop.bounds if crop is not None else DEFAULT_BOUNDS
+        bounds = crop.padded_bounds() if crop is not None else DEFAULT_BOUNDS
     grid = VoxelGrid.from_bounds(bounds, res)
     nx, ny, nz = grid.shape
     block = coarse_factor or (4 if res <= 512 else 8)
@@ -328,6 +329,8 @@ def extract_mesh(
     mesh, grid, run_stats = extract_sdf_mesh(
         field_, res, bounds, crop, chunk=chunk, narrow_band=narrow_band, progress=progress
     )
+    if options.clip is not None and options.clip_margin is None:
+        options = dataclasses.replace(options, clip_margin=0.5 * grid.voxel)
     t0 = time.perf_counter()
     mesh = postprocess_mesh(mesh, options)
     run_stats.times["postprocess"] = time.perf_counter() - t0

@@ -36,6 +36,9 @@ class PostprocessOptions:
         keep_largest: keep only the connected component with the most faces.
         decimate: target face count for quadric decimation; None disables.
         clip: crop cylinder to clip the mesh to; None disables.
+        clip_margin: grow the cylinder by this much (world units) before clipping, so that
+            surfaces lying on it survive marching-cubes jitter; None = 0 here and half a
+            voxel in :func:`~hybridneus.meshing.extract.extract_mesh`.
     """
 
     enabled: bool = True
@@ -47,6 +50,7 @@ class PostprocessOptions:
     keep_largest: bool = False
     decimate: int | None = None
     clip: CropVolume | None = None
+    clip_margin: float | None = None
 
 
 def _vertex_colors(mesh: trimesh.Trimesh) -> np.ndarray | None:
@@ -97,9 +101,9 @@ def _from_meshset(ms, with_colors: bool) -> trimesh.Trimesh:
     return _rebuild(out.vertex_matrix(), out.face_matrix().astype(np.int64), colors)
 
 
-def clip_mesh(mesh: trimesh.Trimesh, crop: CropVolume) -> trimesh.Trimesh:
-    """Drop faces with any vertex outside ``crop``; keep colours."""
-    inside = crop.contains(np.asarray(mesh.vertices), margin=1e-9)
+def clip_mesh(mesh: trimesh.Trimesh, crop: CropVolume, margin: float = 0.0) -> trimesh.Trimesh:
+    """Drop faces with any vertex outside ``crop`` grown by ``margin``; keep colours."""
+    inside = crop.contains(np.asarray(mesh.vertices), margin=margin + 1e-9)
     keep = inside[mesh.faces].all(axis=1)
     return _rebuild(np.asarray(mesh.vertices), np.asarray(mesh.faces)[keep], _vertex_colors(mesh))
 
@@ -143,7 +147,7 @@ def postprocess_mesh(
     if not options.enabled or len(mesh.faces) == 0:
         return mesh
     if options.clip is not None:
-        mesh = clip_mesh(mesh, options.clip)
+        mesh = clip_mesh(mesh, options.clip, options.clip_margin or 0.0)
         if len(mesh.faces) == 0:
             return mesh
 

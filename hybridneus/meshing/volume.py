@@ -26,6 +26,18 @@ class CropVolume:
         """The axis-aligned box around the cylinder, ((x, y, z)_min, (x, y, z)_max)."""
         return ((-self.r, self.y_min, -self.r), (self.r, self.y_max, self.r))
 
+    def padded_bounds(self, pad: float = 0.02, limit: float = 1.0) -> Bounds:
+        """:attr:`bounds` grown by ``pad`` x the longest side, cut to [-limit, limit]^3.
+
+        The padding leaves grid points outside the crop, so marching cubes closes surfaces
+        that end on it (a trained field is cut by the crop: ``max(sdf, crop_sdf)``).
+        """
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in self.bounds)
+        margin = pad * float((hi - lo).max())
+        lo = np.maximum(lo - margin, -limit)
+        hi = np.minimum(hi + margin, limit)
+        return tuple(lo.tolist()), tuple(hi.tolist())  # type: ignore[return-value]
+
     def contains(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """Whether each of ``points`` (n_points, 3) lies inside (grown by ``margin``) -> (n,)."""
         radial = points[:, 0] ** 2 + points[:, 2] ** 2 <= (self.r + margin) ** 2

@@ -1,0 +1,112 @@
+"""``hybridneus mesh``: extract a (coloured) mesh from a trained run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def mesh(
+    run: Annotated[
+        Path | None, typer.Argument(help="Run folder (default: the latest run under --runs-root).")
+    ] = None,
+    res: Annotated[int, typer.Option("--res", help="Grid points along the longest side.")] = 300,
+    color: Annotated[
+        bool, typer.Option("--color/--no-color", help="Attach vertex colours.")
+    ] = False,
+    format: Annotated[str, typer.Option("--format", help="ply, obj or glb.")] = "ply",
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Output file (default <run>/mesh_<res>.<fmt>).")
+    ] = None,
+    device: Annotated[str, typer.Option("--device", help="auto, cpu, cuda or cuda:N.")] = "auto",
+    no_postprocess: Annotated[
+        bool, typer.Option("--no-postprocess", help="Keep the raw marching-cubes mesh.")
+    ] = False,
+    min_component: Annotated[
+        float,
+        typer.Option(
+            "--min-component",
+            help="Drop components smaller than this fraction of the mesh diagonal (0: keep all).",
+        ),
+    ] = 0.05,
+    min_component_faces: Annotated[
+        int,
+        typer.Option(
+            "--min-component-faces",
+            help="Drop components with fewer faces (0: off).",
+        ),
+    ] = 0,
+    keep_largest: Annotated[
+        bool, typer.Option("--keep-largest", help="Keep only the largest connected component.")
+    ] = False,
+    decimate: Annotated[
+        int, typer.Option("--decimate", help="Target face count (0: no decimation).")
+    ] = 0,
+    clip: Annotated[
+        bool, typer.Option("--clip/--no-clip", help="Clip to the scene's crop cylinder.")
+    ] = True,
+    chunk: Annotated[int, typer.Option("--chunk", help="Points per field query.")] = 2**18,
+    preview: Annotated[
+        bool, typer.Option("--preview/--no-preview", help="Write a PNG preview.")
+    ] = True,
+    runs_root: Annotated[Path, typer.Option("--runs-root", help="Where runs live.")] = Path("runs"),
+) -> None:
+    """Extract the surface of a trained run as a mesh (PLY/OBJ/GLB) plus a PNG preview."""
+    import time
+
+    from hybridneus.errors import ConfigError
+    from hybridneus.meshing import MESH_FORMATS, CropVolume, PostprocessOptions, save_mesh
+    from hybridneus.meshing.extract import ExtractionStats, extract_mesh
+    from hybridneus.meshing.render import save_preview
+    from hybridneus.training.runs import latest_run, load_field
+
+    fmt = format.lower()
+    if fmt not in MESH_FORMATS:
+        raise ConfigError(f"--format {format}: expected one of {', '.join(MESH_FORMATS)}")
+    if res < 8 or res > 2048:
+        raise ConfigError(f"--res {res}: expected 8 .. 2048")
+    if decimate < 0 or min_component < 0 or min_component_faces < 0:
+        raise ConfigError("--decimate/--min-component/--min-component-faces must be >= 0")
+    run_dir = Path(run) if run is not None else latest_run(runs_root)
+    if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
+        run_dir = latest_run(run_dir)  # a runs root was given: use its latest run
+    field = load_field(run_dir, device=device)
+
+    crop = None
+    crop_values = getattr(field, "crop", None)
+    if crop_values is not None:
+        r, y0, y1 = (float(v) for v in crop_values)
+        crop = CropVolume(r, y0, y1)
+    options = PostprocessOptions(
+        enabled=not no_postprocess,
+        min_component_diameter=min_component or None,
+        min_component_faces=min_component_faces or None,
+        keep_largest=keep_largest,
+        decimate=decimate or None,
+        clip=crop if clip else None,
+    )
+    if crop is not None and not clip:
+        # extract_mesh clips to its crop by default; an explicit far cylinder turns that off.
+        options.clip = CropVolume(1e9, -1e9, 1e9)
+    stats = ExtractionStats()
+    start = time.perf_counter()
+    result = extract_mesh(
+        field, res=res, crop=crop, color=color, chunk=chunk, postprocess=options, stats=stats
+    )
+    elapsed = time.perf_counter() - start
+    if len(result.faces) == 0:
+        from hybridneus.errors import MeshError
+
+        raise MeshError(f"{run_dir}: the field has no zero level inside the volume at res {res}")
+    path = Path(out) if out is not None else run_dir / f"mesh_{res}.{fmt}"
+    save_mesh(result, path, fmt)
+    typer.echo(
+        f"{path}: {len(result.vertices)} vertices, {len(result.faces)} faces"
+        f"{', coloured' if color else ''} ({elapsed:.1f} s, "
+        f"{100 * stats.active_fraction:.1f}% of the {res}-grid evaluated)"
+    )
+    if preview:
+        png = save_preview(result, path.with_suffix(".png"))
+        typer.echo(f"{png}: preview")
