@@ -73,12 +73,20 @@ def _median_time(fn, repeats: int) -> float:
     return float(np.median(times))
 
 
+def _vm_hwm_mb() -> float:
+    """Peak resident memory of this process (VmHWM; unlike ru_maxrss it resets at exec)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
 def child_load(root: str) -> dict:
-    import resource
     import tracemalloc
 
     from hybridneus.data import load_dataset
 
+    before = _vm_hwm_mb()
     tracemalloc.start()
     t0 = time.perf_counter()
     ds = load_dataset(root)
@@ -90,7 +98,8 @@ def child_load(root: str) -> dict:
     return {
         "load_s": wall,
         "tracemalloc_peak_mb": peak / 2**20,
-        "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "peak_rss_mb": _vm_hwm_mb(),
+        "peak_rss_before_load_mb": before,
         "arrays_mb": final / 2**20,
         "n_events": len(ev),
     }
