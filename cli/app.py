@@ -24,6 +24,7 @@ app = typer.Typer(
 # (command name, module under hybridneus.cli, function name). Each module owns one command.
 _COMMANDS: list[tuple[str, str, str]] = [
     ("info", "info", "info"),
+    ("fit", "fit", "fit"),
     ("preview", "preview", "preview"),
     ("simulate", "simulate", "simulate"),
 ]

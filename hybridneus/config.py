@@ -66,7 +66,7 @@ class RenderConfig:
     n_coarse: int = 24  # samples per ray placed uniformly (over occupied space)
     n_importance: int = 16  # samples per ray added by NeuS up-sampling (split over rounds)
     up_rounds: int = 2  # NeuS up-sampling rounds, at inv_s = up_base_inv_s * 2**round
-    up_base_inv_s: float = 64.0
+    up_base_inv_s: float = 64.0  # sharpness of the first up-sampling round (doubles per round)
     occupancy: bool = True  # skip empty space with an occupancy grid refreshed from the SDF
     occupancy_resolution: int = 64  # cells per axis over the crop box
     occupancy_every: int = 16  # steps between occupancy refreshes
@@ -86,7 +86,7 @@ class LossConfig:
     lambda_eikonal: float = 0.1  # (|grad sdf| - 1)^2 on samples and random volume points
     lambda_curvature: float = 0.0  # finite-difference normal variation on random points
     lambda_sparsity: float = 0.0  # exp(-tau |sdf|) on random points in the crop (anti-floater)
-    sparsity_tau: float = 50.0
+    sparsity_tau: float = 50.0  # decay of the sparsity term (1/world units)
     n_random_points: int = 1024  # random volume points per step for Eikonal/regularisers
     curvature_step: float = 0.01  # finite-difference step of the curvature term (world units)
 
@@ -100,12 +100,12 @@ class TrainConfig:
     n_rays: int = 256  # pixels per step, each rendered at the window's start and end pose
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)
-    betas: list[float] = field(default_factory=lambda: [0.9, 0.99])
-    adam_eps: float = 1e-15
+    betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
+    adam_eps: float = 1e-15  # Adam epsilon
     warmup: int = 50  # linear learning-rate warm-up steps
     decay_start: float = 0.5  # fraction of training after which the lr decays exponentially
     decay_final: float = 0.1  # lr multiplier reached at the last step
-    seed: int = 0
+    seed: int = 0  # seeds torch, the ray jitter and the event-window sampler
     threads: int = 0  # torch CPU threads (0: leave torch's default)
     log_every: int = 10  # steps between metrics.csv rows / TensorBoard scalars
     preview_every: int = 500  # steps between preview PNGs (0: never)
@@ -117,18 +117,18 @@ class TrainConfig:
 class DataConfig:
     """The dataset and overrides of its scene preset (``None``: the preset's value)."""
 
-    path: str = ""
-    split: str = "train"
-    threshold: float | None = None
-    polarity_offset: float | None = None
-    max_window: int | None = None
-    cyclic: bool | None = None
-    neg_ratio: float | None = None
-    tonemap_eps: float | None = None
-    crop_r: float | None = None
-    crop_y_min: float | None = None
-    crop_y_max: float | None = None
-    background: list[float] | None = None
+    path: str = ""  # dataset folder (set by the CLI / fit())
+    split: str = "train"  # split to train on
+    threshold: float | None = None  # contrast threshold C
+    polarity_offset: float | None = None  # added to each event's polarity
+    max_window: int | None = None  # longest event window, in views
+    cyclic: bool | None = None  # windows wrap around (360-degree captures)
+    neg_ratio: float | None = None  # fraction of rays drawn uniformly (not from events)
+    tonemap_eps: float | None = None  # eps in log(c^2.2 + eps)
+    crop_r: float | None = None  # crop-cylinder radius around the y axis
+    crop_y_min: float | None = None  # crop-cylinder bottom
+    crop_y_max: float | None = None  # crop-cylinder top
+    background: list[float] | None = None  # RGB in [0, 1] behind the object
 
     def overrides(self) -> dict[str, Any]:
         """The preset overrides that are set, as ``{name: value}`` for the data module."""

@@ -228,11 +228,11 @@ class Trainer:
         self.step += 1
         seconds = time.perf_counter() - t_start
         self.elapsed += seconds
-        logs = {f"loss/{k}": float(v) for k, v in terms.items()}
+        logs = {f"loss/{k}": float(v.detach()) for k, v in terms.items()}
         logs.update(
             {
-                "loss/total": float(total),
-                "inv_s": float(self.field.inv_s()),
+                "loss/total": float(total.detach()),
+                "inv_s": float(self.field.inv_s().detach()),
                 "lr": cfg.train.lr * factor,
                 "levels": float(self.field.active_levels()),
                 "occupied": self.occupied_fraction,

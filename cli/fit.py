@@ -1,0 +1,106 @@
+"""``hybridneus fit``: train a hybrid NeuS field from an event dataset."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def fit(
+    data: Annotated[
+        Path | None,
+        typer.Argument(
+            help="Dataset folder (EventNeRF layout). Optional with --resume.", show_default=False
+        ),
+    ] = None,
+    preset: Annotated[
+        str, typer.Option(help="Configuration preset: fast (CPU), quality or eventneus.")
+    ] = "fast",
+    device: Annotated[str, typer.Option(help="auto, cpu, cuda or cuda:N.")] = "auto",
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            help="Override a config key, e.g. --set train.lr=0.005 --set data.threshold=0.2 "
+            "(repeatable; see docs/training.md).",
+            show_default=False,
+        ),
+    ] = None,
+    config: Annotated[
+        Path | None,
+        typer.Option(help="Start from a YAML config (e.g. a run's config.yaml).",
+                     show_default=False),
+    ] = None,
+    out: Annotated[Path, typer.Option(help="Runs folder; each fit makes runs/<scene>-<time>.")]
+    = Path("runs"),
+    resume: Annotated[
+        Path | None,
+        typer.Option(help="Continue this run folder from its last checkpoint.",
+                     show_default=False),
+    ] = None,
+    iters: Annotated[
+        int | None, typer.Option(help="Training steps (default: the preset's).",
+                                 show_default=False)
+    ] = None,
+    minutes: Annotated[
+        float | None,
+        typer.Option(help="Wall-clock budget; the schedules adapt to the measured speed.",
+                     show_default=False),
+    ] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed.", show_default=False)] = None,
+    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+) -> None:
+    """Train on DATA's event stream and write a run folder (config, checkpoints, previews).
+
+    Ctrl-C saves a checkpoint; continue with --resume RUN. `hybridneus mesh` then extracts
+    the mesh of runs/latest.
+    """
+    import sys
+
+    from hybridneus.api import fit as api_fit
+    from hybridneus.config import load_config, preset_config
+    from hybridneus.errors import ConfigError
+
+    overrides = list(set_ or [])
+    if iters is not None:
+        if iters < 1:
+            raise ConfigError(f"--iters {iters}: must be >= 1")
+        overrides.append(f"train.iters={iters}")
+    if minutes is not None:
+        if minutes <= 0:
+            raise ConfigError(f"--minutes {minutes}: must be > 0")
+        overrides.append(f"train.minutes={minutes}")
+        if iters is None:
+            # The time budget decides; the iteration count only caps it.
+            overrides.append("train.iters=100000000")
+    if seed is not None:
+        overrides.append(f"train.seed={seed}")
+    if resume is None and data is None:
+        raise ConfigError("DATA: missing dataset folder (or give --resume RUN)")
+    if resume is not None:
+        cfg = None
+    elif config is not None:
+        cfg = load_config(config)
+    else:
+        cfg = preset_config(preset)
+    field = api_fit(
+        data,
+        cfg,
+        overrides=overrides,
+        out=out,
+        resume=resume,
+        device=device,
+        progress=not quiet,
+    )
+    run_dir = field.run_dir
+    if field.interrupted:
+        typer.echo(
+            f"interrupted at step {field.trainer_step}; checkpoint saved in {run_dir}\n"
+            f"continue with: hybridneus fit --resume {run_dir}",
+            err=True,
+        )
+        sys.exit(130)
+    typer.echo(f"run: {run_dir} (step {field.trainer_step})")
+    typer.echo("next: hybridneus mesh  (uses runs/latest)")

@@ -1,0 +1,104 @@
+"""HybridField: initial sphere, numpy/torch interface, double backward, presets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from hybridneus.config import FieldConfig, GridConfig, preset_config
+from hybridneus.model.field import HybridField, crop_sdf
+from hybridneus.model.protocol import Field
+
+
+def small_field(**field_kw) -> HybridField:
+    torch.manual_seed(0)
+    grid = GridConfig(n_levels=4, log2_table_size=12, base_resolution=8, max_resolution=32)
+    return HybridField(grid, FieldConfig(**field_kw))
+
+
+def test_initial_sdf_is_a_sphere_of_the_init_radius():
+    f = small_field(init_radius=0.4)
+    dirs = torch.nn.functional.normalize(torch.randn(200, 3), dim=-1)
+    inside = f.raw_sdf(dirs * 0.3)
+    outside = f.raw_sdf(dirs * 0.5)
+    assert (inside < 0).all() and (outside > 0).all()
+    # Geometric init of a 64-wide head is approximate (a few hundredths).
+    assert f.raw_sdf(dirs * 0.4).abs().max() < 0.1
+    assert float(f.raw_sdf(torch.zeros(1, 3))) == pytest.approx(-0.4, abs=0.12)
+
+
+def test_numpy_in_numpy_out_and_torch_in_torch_out():
+    f = small_field()
+    assert isinstance(f, Field)
+    pts = np.random.default_rng(0).uniform(-1, 1, (10, 3)).astype(np.float32)
+    s = f.sdf(pts)
+    assert isinstance(s, np.ndarray) and s.shape == (10,)
+    st = f.sdf(torch.from_numpy(pts))
+    assert isinstance(st, torch.Tensor) and torch.allclose(st, torch.from_numpy(s))
+    rgb = f.color(pts, pts)
+    assert isinstance(rgb, np.ndarray) and rgb.shape == (10, 3)
+    assert (rgb >= 0).all() and (rgb <= 1).all()
+    sdf, grad = f.sdf_and_gradient(torch.from_numpy(pts))
+    assert grad.shape == (10, 3)
+    with pytest.raises(ValueError, match="n_points, 3"):
+        f.sdf(np.zeros((4, 2), np.float32))
+
+
+def test_public_sdf_is_cropped_to_the_cylinder():
+    torch.manual_seed(0)
+    grid = GridConfig(n_levels=4, log2_table_size=12, base_resolution=8, max_resolution=32)
+    f = HybridField(grid, FieldConfig(init_radius=0.5), crop=(0.2, -0.3, 0.3))
+    p = torch.tensor([[0.0, 0.0, 0.0], [0.15, 0.0, 0.0], [0.25, 0.0, 0.0], [0.0, 0.35, 0.0]])
+    s = f.sdf(p)
+    assert s[0] < 0 and s[1] < 0  # inside the cylinder and the (capped) sphere
+    assert s[2] > 0 and s[3] > 0  # outside the cylinder
+    assert torch.allclose(crop_sdf(p, f.crop)[2:], torch.tensor([0.05, 0.05]), atol=1e-6)
+    # The initial sphere is capped to fit the crop radius.
+    assert f.init_radius == pytest.approx(0.18)
+
+
+def test_eikonal_gradient_reaches_the_grid_tables():
+    f = small_field()
+    f.update_step(10**6, 1)  # all levels active
+    # Geometric init zeroes the weights reading the grid; give them values first.
+    torch.nn.init.normal_(f.sdf_net.layers[0].weight, std=0.1)
+    pts = torch.rand(256, 3) * 2 - 1
+    _, grad, _ = f.sdf_gradient_features(pts, create_graph=True)
+    loss = ((grad.norm(dim=-1) - 1) ** 2).mean() + grad[:, 0].mean()
+    loss.backward()
+    table_grads = [t.grad for t in f.encoding.tables]
+    assert all(g is not None for g in table_grads)
+    assert sum(float(g.abs().sum()) for g in table_grads) > 0
+
+
+def test_level_schedule_opens_levels_over_training():
+    f = small_field()
+    f.grid_config.start_levels = 2
+    f.grid_config.levels_full_at = 0.5
+    f.update_step(0, 100)
+    assert f.active_levels() == 2
+    f.update_step(50, 100)
+    assert f.active_levels() == 4
+
+
+def test_eventneus_preset_builds_the_paper_network():
+    cfg = preset_config("eventneus")
+    torch.manual_seed(0)
+    f = HybridField(cfg.grid, cfg.field)
+    linear = [m for m in f.sdf_net.modules() if isinstance(m, torch.nn.Linear)]
+    assert len(linear) == 9 and linear[1].out_features == 256
+    assert f.sdf_net.skips == (4,)
+    f.update_step(0, 100)
+    # The deep geometric init is a rougher sphere: zero level between 0.3 and 0.6.
+    dirs = torch.nn.functional.normalize(torch.randn(64, 3), dim=-1)
+    assert (f.raw_sdf(dirs * 0.3) < 0).all() and (f.raw_sdf(dirs * 0.6) > 0).all()
+    out = f.sdf_gradient_features(torch.rand(8, 3) - 0.5, create_graph=True)
+    assert out[1].shape == (8, 3)
+
+
+def test_learned_background_is_a_parameter():
+    f = small_field(learned_background=True)
+    names = [n for n, _ in f.named_parameters()]
+    assert "background_logit" in names
+    assert torch.allclose(f.background(), torch.full((3,), 159 / 255), atol=1e-4)
