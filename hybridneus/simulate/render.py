@@ -121,6 +121,11 @@ class Renderer:
         )
         dirs = camera.directions(self.supersample).astype(np.float32)  # (h, w, s, 3)
         flat = dirs.transpose(2, 0, 1, 3).reshape(-1, 3)
+        offs = (np.arange(self.supersample) + 0.5) / self.supersample - 0.5
+        # Same sample order as PinholeCamera.directions: column offset varies fastest.
+        self._sub_offsets = [(du, dv) for dv in offs for du in offs]
+        #: Build undistorted rays with Open3D (fast); distorted ones with numpy.
+        self.use_open3d_rays = camera.k1 == 0.0 and camera.k2 == 0.0
         self._dirs_h = np.concatenate([flat, np.ones((flat.shape[0], 1), np.float32)], axis=1)
         # Appearance in linear light, so that interpolation and shading are physical.
         self._corner_lin = np.ascontiguousarray(mesh.corner_colors, np.float32) ** GAMMA
@@ -141,18 +146,13 @@ class Renderer:
             - frames: (n_views, height, width, 3) float32 sRGB in [0, 1].
             - coverage: (n_views, height, width) float32 fraction of a pixel's rays that hit.
         """
-        c2w = np.asarray(c2w, np.float32).reshape(-1, 4, 4)
+        c2w = np.asarray(c2w, np.float64).reshape(-1, 4, 4)
         n = c2w.shape[0]
         h, w, s = self.camera.height, self.camera.width, self.supersample**2
         hw = h * w
         # Sub-pixel samples lead, pixels follow: (n, s, h*w) keeps each sample plane contiguous.
-        # One matmul writes whole contiguous rays: [d, 1] @ [[0, R^T], [o, 0]] = [o, R d].
-        # (Filling origin and direction columns separately is 3-5x slower: strided writes.)
-        lift = np.zeros((n, 4, 6), np.float32)
-        lift[:, :3, 3:] = c2w[:, :3, :3].transpose(0, 2, 1)
-        lift[:, 3, :3] = c2w[:, :3, 3]
-        rays = np.matmul(self._dirs_h[None], lift)
-        out = self._scene.cast_rays(self._o3d.core.Tensor(rays), nthreads=self.n_threads)
+        rays = self._rays(c2w)
+        out = self._scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays), nthreads=self.n_threads)
         t_hit = out["t_hit"].numpy().reshape(-1)
         hit_idx = np.flatnonzero(np.isfinite(t_hit))
         # Per-pixel sums over the hits only (bincount), background for the misses.
@@ -175,6 +175,33 @@ class Renderer:
         frames = (linear ** (1.0 / GAMMA)).reshape(n, h, w, 3)
         coverage = (count / s).reshape(n, h, w)
         return frames, coverage
+
+    def _rays(self, c2w: np.ndarray) -> np.ndarray:
+        """Rays (n_views, supersample**2 * height * width, 6): origin, direction."""
+        n = c2w.shape[0]
+        h, w, s = self.camera.height, self.camera.width, self.supersample**2
+        if self.use_open3d_rays:
+            # Open3D builds pinhole rays in parallel C++ with the same convention (direction
+            # K^-1 [u + 0.5, v + 0.5, 1]); a sub-pixel offset is a shifted principal point.
+            o3d = self._o3d
+            rays = np.empty((n, s, h * w, 6), np.float32)
+            w2c = np.linalg.inv(c2w)
+            for i in range(n):
+                extrinsic = o3d.core.Tensor(w2c[i])
+                for j, (du, dv) in enumerate(self._sub_offsets):
+                    K = self.camera.K.copy()
+                    K[0, 2] -= du
+                    K[1, 2] -= dv
+                    r = o3d.t.geometry.RaycastingScene.create_rays_pinhole(
+                        o3d.core.Tensor(K), extrinsic, w, h)
+                    rays[i, j] = r.numpy().reshape(-1, 6)
+            return rays.reshape(n, s * h * w, 6)
+        # One matmul writes whole contiguous rays: [d, 1] @ [[0, R^T], [o, 0]] = [o, R d].
+        # (Filling origin and direction columns separately is slower: strided writes.)
+        lift = np.zeros((n, 4, 6), np.float32)
+        lift[:, :3, 3:] = c2w[:, :3, :3].transpose(0, 2, 1)
+        lift[:, 3, :3] = c2w[:, :3, 3]
+        return np.matmul(self._dirs_h[None], lift)
 
     def _shade(self, prim: np.ndarray, bary: np.ndarray, normals: np.ndarray,
                ray_dirs: np.ndarray) -> np.ndarray:
