@@ -145,3 +145,44 @@ def test_public_names_resolve():
 
     for name in data.__all__:
         assert getattr(data, name) is not None, name
+
+
+def test_compressed_npz_and_integer_times(tmp_path):
+    from hybridneus.data import load_dataset
+
+    root = tmp_path / "s"
+    ev = random_events(300, 4)
+    write_split(root / "train", n_views=4, events=ev)
+    npz = root / "train" / "events" / "events.npz"
+    np.savez_compressed(npz, x=ev["x"].astype(np.uint16), y=ev["y"].astype(np.int64),
+                        t=ev["t"].astype(np.int64), p=ev["p"].astype(np.float32))
+    tr = load_dataset(root, overrides={"width": W, "height": H}).splits["train"]
+    np.testing.assert_array_equal(tr.events.x, ev["x"])
+    np.testing.assert_array_equal(tr.events.t, ev["t"])
+    np.testing.assert_array_equal(tr.events.p, ev["p"])
+    assert tr.events.t.dtype == np.float64 and tr.events.p.dtype == np.int8
+
+
+def test_mixed_4x4_and_5x4_intrinsics(tmp_path):
+    from hybridneus.data import load_dataset
+
+    root = tmp_path / "s"
+    write_split(root / "train", n_views=3)
+    m = np.eye(4)
+    m[:3, :3] = default_K()
+    write_txt(root / "train" / "intrinsics" / "r_00001.txt", np.vstack([m, [0.2, 0.05, 0, 0]]))
+    tr = load_dataset(root, overrides={"width": W, "height": H}).splits["train"]
+    np.testing.assert_allclose(tr.distortion, [[0, 0], [0.2, 0.05], [0, 0]])
+    np.testing.assert_allclose(tr.intrinsics, np.stack([default_K()] * 3))
+
+
+def test_notes_for_far_cameras_and_late_timestamps(tmp_path):
+    from hybridneus.data import load_dataset
+
+    root = tmp_path / "s"
+    ev = random_events(100, 4)
+    ev["t"] = ev["t"] + 1000.0
+    write_split(root / "train", n_views=4, c2w=orbit_poses(4, radius=1.5), events=ev)
+    ds = load_dataset(root, overrides={"width": W, "height": H})
+    assert any("radius 1.5" in n for n in ds.notes)
+    assert any("far from 0" in n for n in ds.notes)

@@ -226,3 +226,15 @@ def test_sampler_input_errors(tmp_path):
     ds1 = _split(tmp_path / "one", _events([1], [1], [2.0], [1]), n_views=1)
     with pytest.raises(DatasetError, match="at least 2 views"):
         EventWindowSampler(ds1.splits["train"], ds1.preset)
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_batch_on_cuda(tmp_path):
+    ds = _split(tmp_path, random_events(3000, 5, seed=1))
+    s_cpu = EventWindowSampler(ds.splits["train"], ds.preset, seed=4)
+    s_gpu = EventWindowSampler(ds.splits["train"], ds.preset, seed=4, device="cuda")
+    a, b = s_cpu.sample(128), s_gpu.sample(128)
+    assert b.dirs0.device.type == "cuda" and b.target.device.type == "cuda"
+    assert torch.equal(a.xy, b.xy.cpu()) and torch.allclose(a.dirs1, b.dirs1.cpu())
+    assert a.to("cuda").origins0.device.type == "cuda"

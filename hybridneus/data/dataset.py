@@ -280,9 +280,25 @@ def load_split(
             f"({listed})"
         )
     _check_resolution(K, width, height, split_dir, notes)
+    radius = float(np.linalg.norm(c2w[:, :3, 3], axis=1).max())
+    if radius > 1.0:
+        msg = (
+            f"{split_dir / 'pose'}: cameras reach radius {radius:.3g} > 1; rays are bounded "
+            "by the unit sphere (NeRF++ normalisation), so parts of the scene may be cut"
+        )
+        log.warning(msg)
+        notes.append(msg)
     events = load_events(npz[0], width, height)
     if events.polarity_note != "-1/+1":
         notes.append(f"{npz[0]}: polarity stored as {events.polarity_note}")
+    t0, t_max = float(events.t[0]), events.t_max
+    if t0 > 0.1 * t_max:
+        msg = (
+            f"{npz[0]}: timestamps start at {t0:.6g}, far from 0 (max {t_max:.6g}); view i "
+            "of N is placed at i / (N - 1) * max(t), which assumes t starts near 0"
+        )
+        log.warning(msg)
+        notes.append(msg)
     return SplitData(
         name=split_dir.name,
         path=split_dir,
