@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from scipy.spatial.transform import Rotation
 
 ArrayLike = np.ndarray | torch.Tensor
 
@@ -111,6 +110,47 @@ def near_far_unit_sphere(
     return near, far
 
 
+def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotations -> (n, 4) unit quaternions (w, x, y, z), Shepperd's method."""
+    m = R
+    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    diag = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
+    k = diag.argmax(axis=1)  # the largest of 4w^2-1, 4x^2-1, ... keeps the division stable
+    q = np.empty((R.shape[0], 4))
+    for case in range(4):
+        sel = k == case
+        if not np.any(sel):
+            continue
+        a = m[sel]
+        if case == 0:
+            s = np.sqrt(1.0 + a[:, 0, 0] + a[:, 1, 1] + a[:, 2, 2]) * 2
+            q[sel] = np.stack([0.25 * s, (a[:, 2, 1] - a[:, 1, 2]) / s,
+                               (a[:, 0, 2] - a[:, 2, 0]) / s, (a[:, 1, 0] - a[:, 0, 1]) / s], 1)
+        elif case == 1:
+            s = np.sqrt(1.0 + a[:, 0, 0] - a[:, 1, 1] - a[:, 2, 2]) * 2
+            q[sel] = np.stack([(a[:, 2, 1] - a[:, 1, 2]) / s, 0.25 * s,
+                               (a[:, 0, 1] + a[:, 1, 0]) / s, (a[:, 0, 2] + a[:, 2, 0]) / s], 1)
+        elif case == 2:
+            s = np.sqrt(1.0 + a[:, 1, 1] - a[:, 0, 0] - a[:, 2, 2]) * 2
+            q[sel] = np.stack([(a[:, 0, 2] - a[:, 2, 0]) / s, (a[:, 0, 1] + a[:, 1, 0]) / s,
+                               0.25 * s, (a[:, 1, 2] + a[:, 2, 1]) / s], 1)
+        else:
+            s = np.sqrt(1.0 + a[:, 2, 2] - a[:, 0, 0] - a[:, 1, 1]) * 2
+            q[sel] = np.stack([(a[:, 1, 0] - a[:, 0, 1]) / s, (a[:, 0, 2] + a[:, 2, 0]) / s,
+                               (a[:, 1, 2] + a[:, 2, 1]) / s, 0.25 * s], 1)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    """(n, 4) unit quaternions (w, x, y, z) -> (n, 3, 3) rotations."""
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1),
+    ], 1)
+
+
 def interpolate_pose(c2w_a: np.ndarray, c2w_b: np.ndarray, w: float | np.ndarray) -> np.ndarray:
     """Camera-to-world pose between two poses: slerp of the rotation, lerp of the position.
 
@@ -121,7 +161,7 @@ def interpolate_pose(c2w_a: np.ndarray, c2w_b: np.ndarray, w: float | np.ndarray
 
     Returns:
         (4, 4) or (n, 4, 4) float64 pose; ``w = 0`` gives ``c2w_a`` and ``w = 1`` ``c2w_b``
-        (up to float rounding). The rotation follows the shorter arc.
+        exactly. The rotation turns at constant speed along the shorter arc.
     """
     a = np.asarray(c2w_a, dtype=np.float64)
     b = np.asarray(c2w_b, dtype=np.float64)
@@ -133,15 +173,24 @@ def interpolate_pose(c2w_a: np.ndarray, c2w_b: np.ndarray, w: float | np.ndarray
     a4 = np.broadcast_to(a4, (n, 4, 4))
     b4 = np.broadcast_to(b4, (n, 4, 4))
     wv = np.broadcast_to(wv, (n,))
-    ra = Rotation.from_matrix(a4[:, :3, :3])
-    rb = Rotation.from_matrix(b4[:, :3, :3])
-    rel = (ra.inv() * rb).as_rotvec()  # rotation vectors are the shorter arc
-    rot = ra * Rotation.from_rotvec(rel * wv[:, None])
+    qa = _quat_from_matrix(a4[:, :3, :3])
+    qb = _quat_from_matrix(b4[:, :3, :3])
+    dot = (qa * qb).sum(1)
+    qb = np.where(dot[:, None] < 0, -qb, qb)  # q and -q are the same rotation: shorter arc
+    dot = np.abs(dot).clip(max=1.0)
+    theta = np.arccos(dot)
+    sin = np.sin(theta)
+    small = sin < 1e-9
+    safe = np.where(small, 1.0, sin)
+    ca = np.where(small, 1.0 - wv, np.sin((1.0 - wv) * theta) / safe)
+    cb = np.where(small, wv, np.sin(wv * theta) / safe)
+    q = ca[:, None] * qa + cb[:, None] * qb
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
     out = np.zeros((n, 4, 4))
-    out[:, :3, :3] = rot.as_matrix()
+    out[:, :3, :3] = _matrix_from_quat(q)
     out[:, :3, 3] = (1.0 - wv)[:, None] * a4[:, :3, 3] + wv[:, None] * b4[:, :3, 3]
     out[:, 3, 3] = 1.0
-    # Exact endpoints (avoid quaternion round-trip noise where callers compare poses).
+    # Exact endpoints (no quaternion round-trip noise where callers compare poses).
     out[wv == 0.0] = a4[wv == 0.0]
     out[wv == 1.0] = b4[wv == 1.0]
     return out[0] if single else out

@@ -44,7 +44,7 @@ class EventCounter:
         width: image width.
         height: image height.
         max_bytes: memory budget for the checkpoints. Default: 128 MiB.
-        min_stride: smallest number of events between checkpoints. Default: 2**18.
+        min_stride: smallest number of events between checkpoints. Default: 2**16.
     """
 
     def __init__(
@@ -53,7 +53,7 @@ class EventCounter:
         width: int,
         height: int,
         max_bytes: int = 128 << 20,
-        min_stride: int = 1 << 18,
+        min_stride: int = 1 << 16,
     ) -> None:
         self.code = events.pixel_code(width)
         self.n_bins = 2 * width * height
