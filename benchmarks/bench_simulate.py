@@ -27,16 +27,19 @@ import numpy as np
 DEFAULT_MESH = "/work/shared/assets/oakChair/oakChair.obj"
 
 
-def _render_rate(renderer, c2w: np.ndarray, batch: int, n_batches: int) -> tuple[float, list]:
+def _render_rate(renderer, c2w: np.ndarray, batch: int,
+                 n_batches: int) -> tuple[float, float, list]:
+    """(frames/s wall, CPU ms per frame summed over threads, frames); medians over batches."""
     renderer.render(c2w[:batch])  # warm-up (page faults, BVH caches)
-    times, frames = [], []
+    times, cpus, frames = [], [], []
     for b in range(n_batches):
         sl = slice(b * batch, (b + 1) * batch)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         f, _ = renderer.render(c2w[sl])
         times.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
         frames.append(f)
-    return batch / statistics.median(times), frames
+    return batch / statistics.median(times), 1e3 * statistics.median(cpus) / batch, frames
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -85,21 +88,25 @@ def main(argv: list[str] | None = None) -> int:
 
     for ss in sorted({1, args.supersample}):
         r = Renderer(world, cam, ss, n_threads=args.threads)
-        rate, frames = _render_rate(r, c2w, args.batch, args.rate_batches)
+        rate, cpu_ms, frames = _render_rate(r, c2w, args.batch, args.rate_batches)
         results[f"render_fps_ss{ss}"] = rate
+        results[f"render_cpu_ms_per_frame_ss{ss}"] = cpu_ms
         print(f"render supersample {ss}: {rate:.1f} frames/s "
-              f"({ss * ss * args.width * args.height * rate / 1e6:.1f} M rays/s)")
+              f"({ss * ss * args.width * args.height * rate / 1e6:.1f} M rays/s), "
+              f"{cpu_ms:.1f} ms CPU per frame")
     frames = np.concatenate(frames)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     sim = EventSimulator(frames[0], EventModel(threshold=cfg.events.threshold,
                                                eps=cfg.events.eps))
     n_events = sum(len(sim.step(f)) for f in frames[1:])
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+    results["event_cpu_ms_per_interval"] = 1e3 * cpu / (len(frames) - 1)
     results["events_per_interval"] = n_events / (len(frames) - 1)
     results["event_intervals_per_s"] = (len(frames) - 1) / dt
     results["events_per_s"] = n_events / dt
     print(f"events: {n_events / (len(frames) - 1):,.0f} per interval, "
-          f"{(len(frames) - 1) / dt:.1f} intervals/s, {n_events / dt / 1e6:.2f} M events/s")
+          f"{(len(frames) - 1) / dt:.1f} intervals/s, {n_events / dt / 1e6:.2f} M events/s, "
+          f"{1e3 * cpu / (len(frames) - 1):.1f} ms CPU per interval")
 
     if not args.skip_full:
         tmp = Path(tempfile.mkdtemp(prefix="bench_simulate_"))

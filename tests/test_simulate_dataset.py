@@ -240,3 +240,17 @@ def test_cli_simulate_builtin_and_errors(tmp_path):
     neg = _cli("simulate", "builtin:thin", str(tmp_path / "o"), "--views", "1")
     assert neg.returncode == 2 and neg.stderr.startswith("error: ")
     assert _cli("simulate", "--help").returncode == 0
+
+
+@pytest.mark.slow
+def test_full_default_dataset_round_trip(tmp_path):
+    """The paper's setting (999 views, 346 x 260, 2x2 supersampling) end to end."""
+    dataset_mod = pytest.importorskip("hybridneus.data.dataset")
+    out = tmp_path / "device_full"
+    info = simulate_dataset("builtin:device", out, SimulationConfig())
+    ds = dataset_mod.load_dataset(out)
+    for name, n in (("train", 999), ("validation", 100), ("test", 200)):
+        split = ds.splits[name]
+        assert split.c2w.shape[0] == n and (split.width, split.height) == (346, 260)
+        assert float(split.events.t.max()) == n - 1
+        assert info["splits"][name]["n_events"] == split.events.t.size

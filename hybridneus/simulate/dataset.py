@@ -204,7 +204,8 @@ def _simulate_split(name: str, traj: Trajectory, renderer: Renderer, config: Sim
             _write_matrix(split_dir / "pose" / f"r_{k:05d}.txt", c2w[k])
             if config.write_rgb:
                 img = np.round(frame * 255.0).astype(np.uint8)
-                cv2.imwrite(str(split_dir / "rgb" / f"r_{k:05d}.png"), img[..., ::-1])
+                cv2.imwrite(str(split_dir / "rgb" / f"r_{k:05d}.png"), img[..., ::-1],
+                            [cv2.IMWRITE_PNG_COMPRESSION, 1])
         t3 = time.perf_counter()
         render_s += t1 - t0
         events_s += t2 - t1

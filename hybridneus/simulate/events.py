@@ -161,7 +161,10 @@ class EventSimulator:
         self.noise = noise or NoiseConfig()
         self.height, self.width = first_frame.shape[:2]
         self._rng = np.random.default_rng(seed)
-        self._prev = log_intensity(mosaic_rggb(first_frame), self.model.eps).reshape(-1)
+        # Flat index of each pixel's Bayer channel in a (height * width * 3) frame.
+        self._mosaic_idx = (np.arange(self.height * self.width) * 3
+                            + bayer_channel(self.height, self.width).reshape(-1))
+        self._prev = self._log(first_frame)
         self._ref = self._prev.copy()
         n_pix = self._prev.size
         c, o = self.model.threshold, self.model.polarity_offset
@@ -182,7 +185,7 @@ class EventSimulator:
         """Consume frame ``k`` and return the events of the interval ``(k-1, k]``, sorted."""
         self._k += 1
         k = self._k
-        cur = log_intensity(mosaic_rggb(frame), self.model.eps).reshape(-1)
+        cur = self._log(frame)
         prev, ref = self._prev, self._ref
         up = np.floor((cur - ref) / self._c_pos)
         down = np.floor((ref - cur) / self._c_neg)
@@ -221,6 +224,13 @@ class EventSimulator:
         pix, t, p = pix[order], t[order], p[order]
         return EventChunk((pix % self.width).astype(np.int16), (pix // self.width).astype(np.int16),
                           t.astype(np.float64), p.astype(np.int8))
+
+    def _log(self, frame: np.ndarray) -> np.ndarray:
+        """(height * width,) float64 log intensity of the mosaicked frame."""
+        if frame.shape != (self.height, self.width, 3):
+            raise ValueError(f"frame shape {frame.shape} != {(self.height, self.width, 3)}")
+        return log_intensity(np.ascontiguousarray(frame).reshape(-1)[self._mosaic_idx],
+                             self.model.eps)
 
     def _add_noise(self, k: int, pix_parts: list, t_parts: list, p_parts: list) -> None:
         rng, n_pix = self._rng, self._prev.size
