@@ -106,9 +106,9 @@ def _material_texture_and_color(material) -> tuple[object | None, np.ndarray]:
         color = getattr(material, "baseColorFactor", None)
     if color is None:
         color = np.array([200, 200, 200, 255])
-    color = np.asarray(color, dtype=np.float32).reshape(-1)[:3]
-    if color.max() > 1.0:
-        color = color / 255.0
+    raw = np.asarray(color).reshape(-1)[:3]
+    # trimesh stores material colours as uint8 RGBA; floats are taken as [0, 1] already
+    color = raw.astype(np.float32) / (255.0 if raw.dtype.kind in "ui" else 1.0)
     return image, np.clip(color, 0.0, 1.0)
 
 
