@@ -238,3 +238,9 @@ def test_batch_on_cuda(tmp_path):
     assert b.dirs0.device.type == "cuda" and b.target.device.type == "cuda"
     assert torch.equal(a.xy, b.xy.cpu()) and torch.allclose(a.dirs1, b.dirs1.cpu())
     assert a.to("cuda").origins0.device.type == "cuda"
+
+
+def test_event_frame_refuses_more_than_one_loop(tmp_path):
+    sp = _split(tmp_path, random_events(50, 5)).splits["train"]
+    with pytest.raises(ValueError, match="more than one loop"):
+        event_frame(sp, -sp.t_max - 1.0, 1.0)

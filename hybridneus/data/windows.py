@@ -114,7 +114,7 @@ def event_frame(
 
     Args:
         split: the split.
-        t0: window start. A negative ``t0`` wraps (cyclic captures): the window is
+        t0: window start. A negative ``t0`` (>= -T) wraps (cyclic captures): the window is
             ``[t0 + T, T]`` plus ``[0, t1)`` with ``T = max(t)``.
         t1: window end (exclusive).
         polarity_offset: added to each event's polarity (-1/+1).
@@ -123,6 +123,8 @@ def event_frame(
         (height, width) float32 ``E[y, x] = sum(p + polarity_offset)``; an event at
         column x, row y lands in ``E[y, x]``.
     """
+    if t0 < -split.t_max:
+        raise ValueError(f"event_frame: t0={t0} is more than one loop (T={split.t_max}) back")
     counter = _counter(split)
     c = None
     for i0, i1 in _index_ranges(split.events.t, t0, t1):
