@@ -265,3 +265,7 @@ def test_error_names_right_split(tmp_path):
     f = root / "test" / "pose" / "r_00000.txt"
     f.write_text("1 2 3")
     _expect_error(root, f, "found 3")
+
+
+def test_split_folder_given_as_root(scene):
+    _expect_error(scene / "train", scene / "train", "this is a split folder")

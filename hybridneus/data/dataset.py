@@ -357,6 +357,11 @@ def load_dataset(
     found = _find_splits(root)
     if splits is None:
         wanted = list(found)
+        if not wanted and any((root / r).is_dir() for r in _REQUIRED):
+            raise DatasetError(
+                f"{root}: this is a split folder; pass the dataset folder above it "
+                f"({root.parent}) and select the split with splits=[{root.name!r}]"
+            )
         if not wanted:
             raise DatasetError(
                 f"{root}: no split folders (expected e.g. {root / 'train'} holding pose/, "
