@@ -1,0 +1,72 @@
+"""``hybridneus eval``: JSON / table output and exit codes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+import trimesh
+
+
+def _subprocess(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "hybridneus.cli.app", "eval", *args],
+        capture_output=True, text=True, timeout=300,
+    )
+
+
+@pytest.fixture()
+def cli(capsys, monkeypatch):
+    """Run ``hybridneus eval ...`` in this process through main(): (exit code, stdout, stderr)."""
+    from hybridneus.cli.app import main
+
+    def run(*args: str):
+        monkeypatch.setattr(sys, "argv", ["hybridneus", "eval", *args])
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return run
+
+
+def test_eval_prints_json_and_a_table(tmp_path, cli):
+    gt = trimesh.creation.icosphere(subdivisions=4, radius=0.5)
+    pred = trimesh.creation.icosphere(subdivisions=4, radius=0.55)
+    gt.export(tmp_path / "gt.ply")
+    pred.export(tmp_path / "pred.obj")
+    code, stdout, stderr = cli(str(tmp_path / "pred.obj"), str(tmp_path / "gt.ply"), "--json",
+                               "--samples", "2000", "--seed", "3")
+    assert code == 0, stderr
+    out = json.loads(stdout)
+    assert abs(out["chamfer"] - 0.05) < 0.01 and abs(out["sdf_mae"] - 0.05) < 0.005
+    assert out["samples"] == 2000 and out["seed"] == 3
+    code, stdout, _ = cli(str(tmp_path / "pred.obj"), str(tmp_path / "gt.ply"), "--samples",
+                          "500", "--no-sdf")
+    assert code == 0 and "Chamfer distance" in stdout and "SDF-MAE" not in stdout
+
+
+def test_eval_missing_file_exits_2_from_the_console_entry_point(tmp_path):
+    gt = tmp_path / "gt.ply"
+    trimesh.creation.box().export(gt)
+    missing = _subprocess(str(tmp_path / "nope.ply"), str(gt))
+    assert missing.returncode == 2
+    assert missing.stderr.strip() == f"error: {tmp_path / 'nope.ply'}: no such mesh file"
+
+
+def test_eval_bad_input_exits_2_with_one_line(tmp_path, cli):
+    gt = tmp_path / "gt.ply"
+    trimesh.creation.box().export(gt)
+    bad = tmp_path / "bad.ply"
+    bad.write_text("this is not a mesh")
+    code, _, err = cli(str(gt), str(bad))
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith("error: ") and "bad.ply" in err
+    code, _, err = cli(str(gt), str(gt), "--sign", "parity")
+    assert code == 2 and "--sign parity" in err

@@ -1,0 +1,168 @@
+"""Mesh extraction against analytic SDFs: geometry, world frame, narrow band, slabs, colours."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial import cKDTree
+
+from hybridneus.meshing import (
+    CropVolume,
+    ExtractionStats,
+    PostprocessOptions,
+    extract_mesh,
+    extract_sdf_mesh,
+)
+from hybridneus.model.analytic import BoxField, SphereField, TorusField, UnionField
+from hybridneus.model.protocol import Field
+
+RAW = PostprocessOptions(enabled=False)
+
+
+def _sdf_at(field, vertices: np.ndarray) -> np.ndarray:
+    return field.sdf(torch.tensor(vertices, dtype=torch.float32)).numpy()
+
+
+def test_analytic_fields_satisfy_the_protocol_and_have_unit_gradients():
+    pts = torch.rand(500, 3) * 2 - 1
+    for field in (SphereField(0.5), TorusField(0.5, 0.2), BoxField((0.4, 0.3, 0.5))):
+        assert isinstance(field, Field)
+        d, g = field.sdf_and_gradient(pts)
+        assert d.shape == (500,) and g.shape == (500, 3)
+        # exact distance functions: |grad| = 1 almost everywhere
+        assert torch.allclose(g.norm(dim=-1), torch.ones(500), atol=1e-4)
+        rgb = field.color(pts, -g)
+        assert rgb.shape == (500, 3) and rgb.min() >= 0 and rgb.max() <= 1
+
+
+def test_sphere_mesh_is_in_world_coordinates_with_outward_faces():
+    field = SphereField(0.5, center=(0.2, 0.0, 0.0))
+    stats = ExtractionStats()
+    mesh = extract_mesh(field, res=96, progress=False, stats=stats)
+    voxel = 2.0 / 95
+    assert stats.voxel == pytest.approx(voxel)
+    radii = np.linalg.norm(mesh.vertices - [0.2, 0.0, 0.0], axis=1)
+    assert np.abs(radii - 0.5).max() < 0.5 * voxel
+    assert np.allclose(mesh.vertices.mean(axis=0), [0.2, 0.0, 0.0], atol=0.01)
+    assert mesh.is_watertight
+    # positive signed volume = outward winding; marching cubes loses a little volume
+    assert mesh.volume == pytest.approx(4 / 3 * np.pi * 0.5**3, rel=0.02)
+
+
+@pytest.mark.parametrize(
+    "field, tol_voxels",
+    [(TorusField(0.5, 0.2, center=(0.0, 0.1, -0.1)), 0.5), (BoxField((0.4, 0.3, 0.5)), 1.0)],
+)
+def test_vertices_lie_on_the_zero_level(field, tol_voxels):
+    mesh, grid, _ = extract_sdf_mesh(field, res=80, progress=False)
+    assert len(mesh.faces) > 1000
+    # the box's sharp edges are cut by marching cubes, hence the looser bound there
+    assert np.abs(_sdf_at(field, mesh.vertices)).max() < tol_voxels * grid.voxel
+
+
+def test_bounds_and_crop_select_the_world_volume():
+    field = SphereField(0.3, center=(0.5, 0.5, 0.5))
+    mesh = extract_mesh(field, res=64, bounds=((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), progress=False)
+    grid_voxel = 1.0 / 63
+    assert np.abs(np.linalg.norm(mesh.vertices - 0.5, axis=1) - 0.3).max() < 0.5 * grid_voxel
+    # the crop cylinder r = 0.25, -0.3 <= y <= 0.2 keeps two caps of a sphere of radius 0.3
+    crop = CropVolume(0.25, -0.3, 0.2)
+    cut = extract_mesh(SphereField(0.3), res=64, crop=crop, progress=False)
+    whole = extract_mesh(SphereField(0.3), res=64, progress=False)
+    v = cut.vertices
+    # analytic area of the kept band (0.166 < y < 0.2) and bottom cap: 2 pi R (0.034 + 0.134)
+    assert cut.area == pytest.approx(2 * np.pi * 0.3 * (0.2 - 0.3 + 0.3 - np.sqrt(0.09 - 0.0625)
+                                                          + 0.3 - np.sqrt(0.09 - 0.0625)), rel=0.1)
+    assert cut.area < 0.5 * whole.area
+    assert v[:, 1].min() < -0.2 and v[:, 1].max() > 0.15
+    voxel = 2 * 0.25 * 1.02 / 63
+    assert (v[:, 0] ** 2 + v[:, 2] ** 2 <= (0.25 + voxel) ** 2).all()
+    assert v[:, 1].min() >= -0.3 - voxel and v[:, 1].max() <= 0.2 + voxel
+
+
+def test_narrow_band_gives_the_full_grid_mesh():
+    field = TorusField(0.45, 0.15)
+    full, _, full_stats = extract_sdf_mesh(field, res=72, narrow_band=False, progress=False)
+    band, _, band_stats = extract_sdf_mesh(field, res=72, narrow_band=True, progress=False)
+    assert band_stats.fine_points < 0.5 * full_stats.fine_points
+    assert len(band.vertices) == len(full.vertices) and len(band.faces) == len(full.faces)
+    d1, _ = cKDTree(full.vertices).query(band.vertices)
+    d2, _ = cKDTree(band.vertices).query(full.vertices)
+    assert max(d1.max(), d2.max()) < 1e-6
+
+
+def test_slabs_stitch_into_the_single_volume_mesh():
+    field = SphereField(0.6)
+    one, _, s1 = extract_sdf_mesh(field, res=60, progress=False)
+    many, _, s2 = extract_sdf_mesh(field, res=60, progress=False, slab_bytes=4 * 60 * 60 * 6)
+    assert s1.slabs == 1 and s2.slabs > 5
+    assert len(one.vertices) == len(many.vertices) and len(one.faces) == len(many.faces)
+    assert many.is_watertight
+
+
+def test_empty_volume_gives_an_empty_mesh():
+    mesh = extract_mesh(SphereField(0.2, center=(5.0, 0.0, 0.0)), res=32, progress=False)
+    assert len(mesh.faces) == 0
+
+
+def test_vertex_colours_follow_the_position_pattern():
+    field = SphereField(0.5, center=(0.1, -0.1, 0.0), pattern="position")
+    mesh = extract_mesh(field, res=64, color=True, progress=False)
+    rgb = np.asarray(mesh.visual.vertex_colors)[:, :3] / 255.0
+    expected = np.clip((mesh.vertices + 1) / 2, 0, 1)
+    # corners are at most one voxel away from the vertex and the pattern's slope is 1/2
+    assert np.abs(rgb - expected).max() < 0.5 * (2 / 63) * np.sqrt(3) + 1 / 255
+    assert np.abs(rgb - expected).mean() < 0.01
+
+
+def test_vertex_colours_keep_stripes_sharp_away_from_their_edges():
+    field = SphereField(0.5, pattern="stripes", stripe_width=0.2)
+    mesh = extract_mesh(field, res=64, color=True, progress=False)
+    rgb = np.asarray(mesh.visual.vertex_colors)[:, :3].astype(float) / 255.0
+    x = mesh.vertices[:, 0]
+    voxel = 2 / 63
+    phase = np.mod(x / 0.2, 1.0) * 0.2
+    far = (phase > 1.5 * voxel) & (phase < 0.2 - 1.5 * voxel)
+    odd = np.mod(np.floor(x / 0.2), 2) == 1
+    assert far.sum() > 100
+    assert np.allclose(rgb[far & ~odd], [1, 0, 0], atol=0.02)
+    assert np.allclose(rgb[far & odd], [0, 0, 1], atol=0.02)
+
+
+def test_postprocess_removes_a_small_floater():
+    body = SphereField(0.5)
+    floater = SphereField(0.03, center=(0.8, 0.8, 0.8))  # diagonal 4% of the whole mesh
+    field = UnionField(body, floater)
+    raw = extract_mesh(field, res=80, postprocess=RAW, progress=False)
+    assert len(raw.split(only_watertight=False)) == 2
+    cleaned = extract_mesh(field, res=80, progress=False)
+    parts = cleaned.split(only_watertight=False)
+    assert len(parts) == 1 and np.linalg.norm(parts[0].vertices, axis=1).max() < 0.52
+    kept = extract_mesh(
+        field, res=80, postprocess=PostprocessOptions(min_component_diameter=None),
+        progress=False,
+    )
+    assert len(kept.split(only_watertight=False)) == 2
+    largest = extract_mesh(
+        field, res=80,
+        postprocess=PostprocessOptions(min_component_diameter=None, keep_largest=True),
+        progress=False,
+    )
+    assert len(largest.split(only_watertight=False)) == 1
+    by_faces = extract_mesh(
+        field, res=80,
+        postprocess=PostprocessOptions(min_component_diameter=None, min_component_faces=500),
+        progress=False,
+    )
+    assert len(by_faces.split(only_watertight=False)) == 1
+
+
+def test_decimation_reaches_the_target_and_keeps_colours():
+    field = SphereField(0.5)
+    mesh = extract_mesh(
+        field, res=64, color=True, postprocess=PostprocessOptions(decimate=2000), progress=False
+    )
+    assert 1800 <= len(mesh.faces) <= 2000
+    assert mesh.visual.kind == "vertex"
+    assert np.abs(np.linalg.norm(mesh.vertices, axis=1) - 0.5).max() < 0.02

@@ -1,0 +1,95 @@
+"""``hybridneus mesh`` end to end on a (barely) trained run of a tiny simulated scene."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from hybridneus.meshing import load_mesh
+
+TINY = [
+    "grid.n_levels=4",
+    "grid.log2_table_size=12",
+    "grid.base_resolution=8",
+    "grid.max_resolution=32",
+    "grid.start_levels=2",
+    "render.n_coarse=8",
+    "render.n_importance=4",
+    "render.occupancy_resolution=16",
+    "render.occupancy_every=8",
+    "render.occupancy_march=24",
+    "loss.n_random_points=64",
+    "train.n_rays=32",
+    "train.warmup=1",
+    "train.log_every=1",
+    "train.preview_every=0",
+    "train.checkpoint_every=0",
+    "train.iters=1",
+]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    from hybridneus.api import fit
+    from hybridneus.config import apply_overrides, preset_config
+    from hybridneus.simulate import SimulationConfig, simulate_dataset
+
+    root = tmp_path_factory.mktemp("mesh_cli")
+    cfg = SimulationConfig(n_views=8, width=24, height=18, val_views=0, test_views=0,
+                           revolutions=1.0, supersample=1)
+    simulate_dataset("builtin:device", root / "device", cfg)
+    fit(root / "device", apply_overrides(preset_config("fast"), TINY), out=root / "runs",
+        device="cpu")
+    return root / "runs"
+
+
+@pytest.fixture()
+def cli(capsys, monkeypatch):
+    """Run ``hybridneus mesh ...`` in this process through main(): (exit code, stderr)."""
+    from hybridneus.cli.app import main
+
+    def run(*args: str):
+        monkeypatch.setattr(sys, "argv", ["hybridneus", "mesh", *args])
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+        return code, capsys.readouterr().err
+
+    return run
+
+
+def test_mesh_latest_run_writes_a_coloured_ply_inside_the_crop_and_a_preview(runs, cli):
+    code, err = cli("--runs-root", str(runs), "--res", "48", "--color", "--device", "cpu")
+    assert code == 0, err
+    run = next(p for p in runs.iterdir() if (p / "checkpoints").is_dir())
+    ply, png = run / "mesh_48.ply", run / "mesh_48.png"
+    assert ply.is_file() and png.read_bytes()[:4] == b"\x89PNG"
+    mesh = load_mesh(ply)
+    assert len(mesh.faces) > 100 and mesh.visual.kind == "vertex"
+    from hybridneus.training.runs import load_field
+
+    r, y0, y1 = (float(v) for v in load_field(run, device="cpu").crop)
+    v = np.asarray(mesh.vertices)
+    slack = 0.05  # half a voxel of clip margin at res 48 plus marching-cubes jitter
+    assert (np.hypot(v[:, 0], v[:, 2]) <= r + slack).all()
+    assert v[:, 1].min() >= y0 - slack and v[:, 1].max() <= y1 + slack
+
+
+def test_mesh_options_and_errors(runs, tmp_path, cli, monkeypatch):
+    out = tmp_path / "m.obj"
+    code, err = cli(str(runs), "--res", "32", "--format", "obj", "--out", str(out),
+                    "--no-postprocess", "--no-preview", "--device", "cpu")
+    assert code == 0, err
+    assert out.is_file() and not out.with_suffix(".png").exists()
+    code, err = cli(str(tmp_path / "no_run"), "--device", "cpu")
+    assert code == 2 and "no_run" in err and err.count("\n") == 1
+    code, err = cli(str(runs), "--format", "stl")
+    assert code == 2 and "--format stl" in err
+    monkeypatch.chdir(tmp_path)  # no runs/ here
+    code, err = cli("--res", "32")
+    assert code == 2 and "no run" in err
