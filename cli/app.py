@@ -27,6 +27,8 @@ _COMMANDS: list[tuple[str, str, str]] = [
     ("fit", "fit", "fit"),
     ("preview", "preview", "preview"),
     ("simulate", "simulate", "simulate"),
+    ("mesh", "mesh", "mesh"),
+    ("eval", "evaluate", "evaluate"),
 ]
 
 for _name, _module, _func in _COMMANDS:
