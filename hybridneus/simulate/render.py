@@ -129,6 +129,9 @@ class Renderer:
         self._dirs_h = np.concatenate([flat, np.ones((flat.shape[0], 1), np.float32)], axis=1)
         # Appearance in linear light, so that interpolation and shading are physical.
         self._corner_lin = np.ascontiguousarray(mesh.corner_colors, np.float32) ** GAMMA
+        self._face_lin = np.ascontiguousarray(self._corner_lin[:, 0])
+        self._face_varying = np.any(self._corner_lin != self._corner_lin[:, :1], axis=(1, 2))
+        self._any_varying = bool(self._face_varying.any())
         self._corner_uv = np.ascontiguousarray(mesh.corner_uv, np.float32)
         self._face_tex = np.asarray(mesh.face_texture, np.int32)
         self._tex_lin = [np.ascontiguousarray(t, np.float32) ** GAMMA for t in mesh.textures]
@@ -210,8 +213,13 @@ class Renderer:
         w1 = bary[:, 0:1]
         w2 = bary[:, 1:2]
         w0 = 1.0 - w1 - w2
-        cc = self._corner_lin[prim]
-        albedo = w0 * cc[:, 0] + w1 * cc[:, 1] + w2 * cc[:, 2]
+        # Most faces have one colour at all corners: gather it and interpolate only the rest.
+        albedo = np.take(self._face_lin, prim, axis=0)
+        if self._any_varying:
+            sel = np.flatnonzero(self._face_varying[prim])
+            if sel.size:
+                cc = self._corner_lin[prim[sel]]
+                albedo[sel] = w0[sel] * cc[:, 0] + w1[sel] * cc[:, 1] + w2[sel] * cc[:, 2]
         if self._tex_lin:
             ftex = self._face_tex[prim]
             for ti, tex in enumerate(self._tex_lin):
@@ -221,10 +229,13 @@ class Renderer:
                 cuv = self._corner_uv[prim[sel]]
                 uv = w0[sel] * cuv[:, 0] + w1[sel] * cuv[:, 1] + w2[sel] * cuv[:, 2]
                 albedo[sel] *= sample_bilinear(tex, uv)
-        facing = (normals * ray_dirs).sum(-1, keepdims=True) > 0
-        normals = np.where(facing, -normals, normals)
-        cos = np.clip(normals @ self._light, 0.0, None)[:, None]
-        return albedo * (self.shading.ambient + self.shading.diffuse * cos)
+        # Two-sided: flipping the normal towards the camera flips the sign of n.l.
+        n_dot_l = normals @ self._light
+        n_dot_d = np.einsum("ij,ij->i", normals, ray_dirs)
+        cos = np.where(n_dot_d > 0, -n_dot_l, n_dot_l)
+        np.maximum(cos, 0.0, out=cos)
+        albedo *= (self.shading.ambient + self.shading.diffuse * cos)[:, None]
+        return albedo
 
 
 def sample_bilinear(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -239,17 +250,23 @@ def sample_bilinear(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
         (n, 3) float32 colours.
     """
     th, tw = texture.shape[:2]
-    x = uv[:, 0] * tw - 0.5
-    y = (1.0 - uv[:, 1]) * th - 0.5
-    x0 = np.floor(x)
-    y0 = np.floor(y)
-    fx = (x - x0)[:, None].astype(np.float32)
-    fy = (y - y0)[:, None].astype(np.float32)
-    x0 = x0.astype(np.int64) % tw
-    y0 = y0.astype(np.int64) % th
-    x1 = (x0 + 1) % tw
-    y1 = (y0 + 1) % th
+    x = uv[:, 0].astype(np.float32) * np.float32(tw) - np.float32(0.5)
+    y = (np.float32(1.0) - uv[:, 1].astype(np.float32)) * np.float32(th) - np.float32(0.5)
+    x0f = np.floor(x)
+    y0f = np.floor(y)
+    fx = (x - x0f)[:, None]
+    fy = (y - y0f)[:, None]
+    x0 = x0f.astype(np.int64) % tw
+    y0 = y0f.astype(np.int64) % th
+    x1 = x0 + 1
+    x1[x1 == tw] = 0
+    y1 = (y0 + 1) * tw
+    y1[y1 == th * tw] = 0
+    y0 *= tw
     flat = texture.reshape(-1, 3)
-    top = flat[y0 * tw + x0] * (1 - fx) + flat[y0 * tw + x1] * fx
-    bottom = flat[y1 * tw + x0] * (1 - fx) + flat[y1 * tw + x1] * fx
-    return top * (1 - fy) + bottom * fy
+    top = np.take(flat, y0 + x0, axis=0)
+    top += (np.take(flat, y0 + x1, axis=0) - top) * fx
+    bottom = np.take(flat, y1 + x0, axis=0)
+    bottom += (np.take(flat, y1 + x1, axis=0) - bottom) * fx
+    top += (bottom - top) * fy
+    return top
