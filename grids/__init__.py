@@ -6,8 +6,8 @@ See docs/grids.md.
 """
 
 from .frequency import FrequencyEncoding, annealing_weights
-from .gather import gather_rows, interpolate_corners, scatter_rows
-from .hash import DenseGrid, HashGrid, level_corners
+from .gather import gather_levels, gather_rows, interpolate_corners, scatter_rows, trilinear
+from .hash import DenseGrid, HashGrid
 from .levels import PRIMES, GridLevel, make_levels, per_level_scale
 from .schedule import LevelSchedule
 from .spherical import SphericalHarmonics
@@ -23,8 +23,9 @@ __all__ = [
     "annealing_weights",
     "gather_rows",
     "interpolate_corners",
-    "level_corners",
+    "gather_levels",
     "make_levels",
     "per_level_scale",
     "scatter_rows",
+    "trilinear",
 ]

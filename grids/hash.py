@@ -7,60 +7,12 @@ from torch import nn
 
 from hybridneus.errors import ConfigError
 
-from .gather import interpolate_corners
+from .gather import gather_levels, trilinear
 from .levels import PRIMES, GridLevel, make_levels
 
-__all__ = ["HashGrid", "DenseGrid", "level_corners"]
+__all__ = ["HashGrid", "DenseGrid"]
 
 _INIT_RANGE = 1e-4
-
-
-def level_corners(
-    xt: torch.Tensor, level: GridLevel, index_dtype: torch.dtype = torch.int64
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Table rows and trilinear weights of the 8 cell corners around each point on one level.
-
-    Args:
-        xt: (3, n_points) positions in [0, 1]^3, point dimension innermost.
-        level: the level's geometry (scale, dense side or hashed table size).
-        index_dtype: torch.int64 or torch.int32 for the returned rows.
-
-    Returns:
-        idx: (8, n_points) rows in [0, level.table_size); corner c = 4 * dz + 2 * dy + dx.
-        w: (8, n_points) trilinear weights (sum to 1 per point), dtype of ``xt``.
-
-    Note:
-        ``w`` is differentiable w.r.t. ``xt`` to any order (it is a product of
-        ``frac(x * scale + 0.5)`` terms); ``idx`` is piecewise constant and carries no
-        gradient.
-    """
-    n = xt.shape[1]
-    pos = xt * level.scale + 0.5
-    cell = pos.detach().floor()
-    frac = pos - cell
-    ic = cell.to(torch.int64)
-    # (3, 2, n): weight of the low and high corner along each axis.
-    wa = torch.stack((1.0 - frac, frac), dim=1)
-    w = (wa[2].view(2, 1, 1, n) * wa[1].view(1, 2, 1, n) * wa[0].view(1, 1, 2, n)).view(8, n)
-    if level.hashed:
-        ix, iy, iz = ic[0], ic[1] * PRIMES[1], ic[2] * PRIMES[2]
-        hx = torch.stack((ix, ix + 1))
-        hy = torch.stack((iy, iy + PRIMES[1]))
-        hz = torch.stack((iz, iz + PRIMES[2]))
-        idx = hz.view(2, 1, 1, n) ^ hy.view(1, 2, 1, n) ^ hx.view(1, 1, 2, n)
-        idx = (idx & (level.table_size - 1)).view(8, n)
-    else:
-        s = level.side
-        # Points outside [0, 1]^3 are clamped to the border cell so rows stay in range.
-        ic = ic.clamp_(0, s - 2)
-        base = ic[0] + ic[1] * s + ic[2] * (s * s)
-        offsets = torch.tensor(
-            [dz * s * s + dy * s + dx for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)],
-            dtype=torch.int64,
-            device=xt.device,
-        )
-        idx = base.unsqueeze(0) + offsets.unsqueeze(1)
-    return idx.to(index_dtype), w
 
 
 class _MultiresGrid(nn.Module):
@@ -85,15 +37,38 @@ class _MultiresGrid(nn.Module):
         self.n_features_per_level = n_features_per_level
         self.out_dim = self.n_levels * n_features_per_level
         self.active_levels = self.n_levels
+        #: Row-index dtype; int64 lets the backward use the fast 1-D ``scatter_add_``.
         self.index_dtype = torch.int64
+        #: Points per chunk: bounds the (n_levels, 8, chunk * F) temporaries.
+        self.chunk_size = 2**16
+        # Coarse levels are dense and fine ones hashed (side grows with the level).
+        self.n_dense = sum(not lvl.hashed for lvl in levels)
+        if any(lvl.hashed for lvl in levels[: self.n_dense]):
+            raise ConfigError(f"{owner}: dense levels must precede hashed levels")
+        sizes = [lvl.table_size for lvl in levels]
+        #: One (table_size, n_features_per_level) parameter per level.
         self.tables = nn.ParameterList(
             nn.Parameter(
-                torch.empty(lvl.table_size, n_features_per_level, dtype=dtype).uniform_(
+                torch.empty(size, n_features_per_level, dtype=dtype).uniform_(
                     -_INIT_RANGE, _INIT_RANGE
                 )
             )
-            for lvl in levels
+            for size in sizes
         )
+        sides = torch.tensor([lvl.side for lvl in levels], dtype=torch.int64)
+        corner = torch.tensor(
+            [[dz, dy, dx] for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)], dtype=torch.int64
+        )
+        dense_offsets = corner[:, 0] * sides[:, None] ** 2 + corner[:, 1] * sides[:, None]
+        dense_offsets = dense_offsets + corner[:, 2]
+        buffers = {
+            "scales": torch.tensor([lvl.scale for lvl in levels], dtype=torch.float64),
+            "sides": sides,
+            "masks": torch.tensor(sizes, dtype=torch.int64) - 1,
+            "dense_offsets": dense_offsets,  # (n_levels, 8)
+        }
+        for name, value in buffers.items():
+            self.register_buffer("_" + name, value, persistent=False)
 
     def set_active_levels(self, n: int) -> None:
         """Use only the ``n`` coarsest levels; finer levels are skipped and output zeros.
@@ -102,6 +77,69 @@ class _MultiresGrid(nn.Module):
             n: number of active levels, clamped to [1, n_levels].
         """
         self.active_levels = max(1, min(int(n), self.n_levels))
+
+    def corners(self, xt: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Table rows of the 8 cell corners and the position inside the cell, active levels.
+
+        Args:
+            xt: (3, n_points) positions in [0, 1]^3, point dimension innermost, table dtype.
+
+        Returns:
+            idx: (n_active, 8, n_points) rows of each level's table, in [0, table_size);
+                corner c = 4 * dz + 2 * dy + dx.
+            frac: (n_active, 3, n_points) ``frac(x * scale + 0.5)``; the trilinear weight of
+                corner (dx, dy, dz) is the product over axes of ``frac`` (bit 1) or
+                ``1 - frac`` (bit 0).
+
+        Note:
+            ``frac`` is differentiable w.r.t. ``xt`` (d frac / d x = scale); ``idx`` is
+            piecewise constant.
+        """
+        n_act, n = self.active_levels, xt.shape[1]
+        pos = xt.unsqueeze(0) * self._scales[:n_act].to(xt.dtype).view(n_act, 1, 1) + 0.5
+        cell = pos.detach().floor()
+        frac = pos - cell  # (n_act, 3, n)
+        dtype = self.index_dtype
+        ic = cell.to(dtype)
+        n_dense = min(self.n_dense, n_act)
+        parts = []
+        if n_dense:
+            sides = self._sides[:n_dense].to(dtype).view(n_dense, 1)
+            # Points outside [0, 1]^3 are clamped to the border cell so rows stay in range.
+            icd = torch.minimum(ic[:n_dense].clamp_min(0), (sides - 2).unsqueeze(-1))
+            base = icd[:, 0] + icd[:, 1] * sides + icd[:, 2] * (sides * sides)
+            offsets = self._dense_offsets[:n_dense].to(dtype).unsqueeze(-1)
+            parts.append(base.unsqueeze(1) + offsets)
+        n_hash = n_act - n_dense
+        if n_hash:
+            ich = ic[n_dense:]
+            masks = self._masks[n_dense:n_act].to(dtype).view(n_hash, 1, 1)
+            # Masking each axis term first is exact for XOR; int32 products wrap modulo
+            # 2**32 like tcnn's uint32 hash, so int32 and int64 give the same rows.
+            p1, p2 = (_wrap(p, dtype) for p in PRIMES[1:])
+            iy = ich[:, 1] * p1
+            iz = ich[:, 2] * p2
+            hx = torch.stack((ich[:, 0], ich[:, 0] + 1), dim=1) & masks
+            hy = torch.stack((iy, iy + p1), dim=1) & masks
+            hz = torch.stack((iz, iz + p2), dim=1) & masks
+            h = (hz.view(n_hash, 2, 1, n) ^ hy.view(n_hash, 1, 2, n)).view(n_hash, 4, 1, n)
+            h = (h ^ hx.view(n_hash, 1, 2, n)).view(n_hash, 8, n)
+            parts.append(h)
+        idx = parts[0] if len(parts) == 1 else torch.cat(parts)
+        return idx, frac
+
+    def _encode(self, xt: torch.Tensor) -> torch.Tensor:
+        """(3, n) -> (n, out_dim)."""
+        n, n_feat, n_act = xt.shape[1], self.n_features_per_level, self.active_levels
+        idx, frac = self.corners(xt)
+        if n_feat > 1:
+            # Repeat per feature so every lerp runs on contiguous (n_act, n * F) memory.
+            frac = frac.unsqueeze(-1).expand(n_act, 3, n, n_feat).reshape(n_act, 3, n * n_feat)
+        corners = gather_levels([self.tables[i] for i in range(n_act)], idx)
+        feats = trilinear(corners, frac).view(n_act, n, n_feat).transpose(0, 1)
+        if n_act < self.n_levels:
+            feats = torch.cat((feats, feats.new_zeros(n, self.n_levels - n_act, n_feat)), dim=1)
+        return feats.reshape(n, self.out_dim)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Encode points.
@@ -116,33 +154,40 @@ class _MultiresGrid(nn.Module):
         Note:
             Differentiable w.r.t. the tables and ``x``, to any order (double backward works,
             so an Eikonal loss on d/dx can be optimised). Inactive levels are not computed
-            and receive no gradient. The output is continuous in ``x`` but its derivative
-            jumps at cell faces (trilinear interpolation).
+            and their tables get no gradient (``.grad`` stays None). The output is continuous
+            in ``x`` but its derivative jumps at cell faces (trilinear interpolation). Points
+            outside [0, 1]^3 give defined but meaningless features (dense levels clamp to
+            the border cell, hashed levels wrap).
         """
         if x.shape[-1] != 3:
-            raise ValueError(f"{type(self).__name__}: expected x of shape (*, 3), got "
-                             f"{tuple(x.shape)}")
+            raise ValueError(
+                f"{type(self).__name__}: expected x of shape (*, 3), got {tuple(x.shape)}"
+            )
         batch = x.shape[:-1]
-        table0 = self.tables[0]
-        xt = x.reshape(-1, 3).to(table0.dtype).t().contiguous()
+        xt = x.reshape(-1, 3).to(self.tables[0].dtype).t().contiguous()
         n = xt.shape[1]
-        f = self.n_features_per_level
-        outs = []
-        for lvl, table in zip(self.levels, self.tables, strict=True):
-            if lvl.index < self.active_levels:
-                idx, w = level_corners(xt, lvl, self.index_dtype)
-                outs.append(interpolate_corners(table, idx, w))
-            else:
-                outs.append(xt.new_zeros(n, f))
-        return torch.cat(outs, dim=1).view(*batch, self.out_dim)
+        if n == 0:
+            return xt.new_zeros(*batch, self.out_dim)
+        chunk = max(1, int(self.chunk_size))
+        if n <= chunk:
+            out = self._encode(xt)
+        else:
+            out = torch.cat([self._encode(xt[:, i : i + chunk]) for i in range(0, n, chunk)])
+        return out.view(*batch, self.out_dim)
 
     def extra_repr(self) -> str:
-        dense = sum(not lvl.hashed for lvl in self.levels)
         return (
             f"n_levels={self.n_levels}, n_features_per_level={self.n_features_per_level}, "
-            f"dense_levels={dense}, active_levels={self.active_levels}, "
+            f"dense_levels={self.n_dense}, active_levels={self.active_levels}, "
             f"resolution={self.levels[0].resolution}..{self.levels[-1].resolution}"
         )
+
+
+def _wrap(prime: int, dtype: torch.dtype) -> int:
+    """The prime as a value of ``dtype`` with the same low 32 bits (int32 wraps)."""
+    if dtype == torch.int32 and prime >= 2**31:
+        return prime - 2**32
+    return prime
 
 
 class HashGrid(_MultiresGrid):
@@ -167,7 +212,7 @@ class HashGrid(_MultiresGrid):
     Attributes:
         out_dim: ``n_levels * n_features_per_level``.
         levels: list of :class:`GridLevel` (scale, resolution, side, hashed, table_size).
-        tables: one (table_size, F) parameter per level.
+        tables: ``nn.ParameterList`` with one (table_size, F) parameter per level.
         active_levels: number of levels in use (see :meth:`set_active_levels`).
 
     Example:

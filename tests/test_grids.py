@@ -7,7 +7,7 @@ import math
 import hybridneus.grids as grids
 import pytest
 import torch
-from hybridneus.grids import DenseGrid, HashGrid, level_corners
+from hybridneus.grids import DenseGrid, HashGrid
 from torch.autograd import gradcheck, gradgradcheck
 from torch.func import functional_call
 
@@ -116,8 +116,7 @@ def test_gradients_match_reference(cfg):
         g2 = torch.autograd.grad(eik, [*params, xr])
         return gx.detach(), g1, g2
 
-    params = list(grid.tables)
-    fast = losses(grid, params)
+    fast = losses(grid, list(grid.tables))
     ref_tables = [t.detach().clone().requires_grad_(True) for t in grid.tables]
     slow = losses(
         lambda xr: _reference_encode(xr, ref_tables, n_levels, base, finest, log2_t), ref_tables
@@ -173,36 +172,53 @@ def test_primitive_gradchecks(n_features):
     assert gradgradcheck(lambda t: grids.gather_rows(t, flat), (table,))
 
 
-def test_hash_rows_inside_table_and_match_tcnn_hash():
+def _level_rows(grid, xt):
+    """Per-level rows (relative to the level's first row) and weights from grid.corners."""
+    idx, frac = grid.corners(xt)
+    bits = torch.tensor([[dx, dy, dz] for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)])
+    f = frac.unsqueeze(1)  # (n_levels, 1, 3, n)
+    w = torch.where(bits.view(1, 8, 3, 1).bool(), f, 1 - f).prod(2)
+    return idx.long(), w
+
+
+@pytest.mark.parametrize("index_dtype", [torch.int64, torch.int32])
+def test_hash_rows_inside_table_and_match_tcnn_hash(index_dtype):
     grid = HashGrid(16, 2, 15, 16, 2048)
-    x = torch.rand(3, 2000) * 1.4 - 0.2  # includes points outside [0, 1]^3
+    grid.index_dtype = index_dtype
+    xt = torch.rand(3, 2000) * 1.4 - 0.2  # includes points outside [0, 1]^3
+    idx, w = _level_rows(grid, xt)
+    assert grid.corners(xt)[0].dtype == index_dtype
     for lvl in grid.levels:
-        idx, w = level_corners(x, lvl)
-        assert idx.dtype == torch.int64
-        assert int(idx.min()) >= 0 and int(idx.max()) < lvl.table_size
-        torch.testing.assert_close(w.sum(0), torch.ones(2000))
+        rows = idx[lvl.index]
+        assert int(rows.min()) >= 0 and int(rows.max()) < lvl.table_size
+        torch.testing.assert_close(w[lvl.index].sum(0), torch.ones(2000))
     lvl = grid.levels[-1]
     assert lvl.hashed
-    xi = torch.tensor([[0.3], [0.6], [0.9]], dtype=torch.float64)
-    idx, _ = level_corners(xi, lvl)
+    xi = torch.tensor([[0.3], [0.6], [0.9]])
+    idx, _ = _level_rows(grid, xi)
     c = [math.floor(float(v) * lvl.scale + 0.5) for v in xi[:, 0]]
     h = (c[0] ^ (c[1] * P1) ^ (c[2] * P2)) & 0xFFFFFFFF & (2**15 - 1)
-    assert int(idx[0, 0]) == h
+    assert int(idx[-1, 0, 0]) == h
+    # Corner 7 is (x + 1, y + 1, z + 1).
+    h7 = ((c[0] + 1) ^ ((c[1] + 1) * P1) ^ ((c[2] + 1) * P2)) & 0xFFFFFFFF & (2**15 - 1)
+    assert int(idx[-1, 7, 0]) == h7
 
 
 def test_dense_levels_are_collision_free():
     grid = HashGrid(4, 2, 15, 6, 31)
+    assert grid.n_dense >= 2
     for lvl in grid.levels:
         if lvl.hashed:
             continue
         s = lvl.side
         assert lvl.table_size == s**3 <= 2**15
         # One point per reachable cell (cell centres of the staggered grid) covers every corner.
-        c = torch.arange(s - 1, dtype=torch.float64)
+        c = torch.arange(s - 1, dtype=torch.float32)
         cz, cy, cx = torch.meshgrid(c, c, c, indexing="ij")
         cells = torch.stack((cx, cy, cz)).reshape(3, -1)
-        x = ((cells + 0.5 - 0.5) / lvl.scale).clamp(0, 1)
-        idx, _ = level_corners(x, lvl)
+        x = (cells / lvl.scale).clamp(0, 1)
+        idx, _ = _level_rows(grid, x)
+        idx = idx[lvl.index]
         pos = (x * lvl.scale + 0.5).floor().long()
         corners = {}
         for k, (dz, dy, dx) in enumerate(
@@ -214,6 +230,7 @@ def test_dense_levels_are_collision_free():
                 row = int(idx[k, j])
                 assert corners.setdefault(key, row) == row
         assert len(set(corners.values())) == len(corners)  # distinct corners, distinct rows
+        assert len(corners) == s**3  # every vertex is reachable
         assert max(corners.values()) < lvl.table_size
 
 
@@ -225,7 +242,8 @@ def test_default_level_geometry():
     assert grid.levels[-1].resolution == 2048
     assert all(t.shape == (lvl.table_size, 2) for t, lvl in zip(grid.tables, grid.levels,
                                                                   strict=True))
-    assert all(float(t.abs().max()) <= 1e-4 for t in grid.tables)
+    for t in grid.tables:
+        assert float(t.detach().abs().max()) <= 1e-4 and float(t.detach().std()) > 5e-5
     assert grid.levels[5].table_size == 2**19
 
 
@@ -237,8 +255,12 @@ def test_inactive_levels_are_zero_and_get_no_gradient():
     out = grid(x)
     assert torch.all(out[:, 2:] == 0) and torch.any(out[:, :2] != 0)
     out.sum().backward()
-    assert grid.tables[0].grad is not None
+    assert grid.tables[0].grad is not None and torch.any(grid.tables[0].grad != 0)
     assert grid.tables[1].grad is None and grid.tables[2].grad is None
+    grid.set_active_levels(2)
+    full = _tiny_grid()
+    torch.testing.assert_close(grid(x)[:, :4], full(x)[:, :4])
+    assert torch.all(grid(x)[:, 4:] == 0)
     grid.set_active_levels(99)
     assert grid.active_levels == 3
     grid.set_active_levels(0)
@@ -265,12 +287,17 @@ def test_float32_matches_float64_and_casts_input():
     torch.testing.assert_close(out32.double(), g64(x), rtol=1e-4, atol=1e-4)
 
 
-def test_int32_indices_match_int64():
+def test_int32_indices_and_chunking_match():
     grid = HashGrid(6, 2, 12, 4, 256)
-    x = torch.rand(500, 3)
+    x = torch.rand(500, 3, requires_grad=True)
     ref = grid(x)
+    (gx_ref,) = torch.autograd.grad(ref.square().sum(), x)
     grid.index_dtype = torch.int32
-    torch.testing.assert_close(grid(x), ref)
+    grid.chunk_size = 64
+    out = grid(x)
+    (gx,) = torch.autograd.grad(out.square().sum(), x)
+    torch.testing.assert_close(out, ref)
+    torch.testing.assert_close(gx, gx_ref)
 
 
 def test_bad_config_and_shape_raise():
