@@ -166,3 +166,22 @@ def test_decimation_reaches_the_target_and_keeps_colours():
     assert 1800 <= len(mesh.faces) <= 2000
     assert mesh.visual.kind == "vertex"
     assert np.abs(np.linalg.norm(mesh.vertices, axis=1) - 0.5).max() < 0.02
+
+
+class _ViewColouredSphere(SphereField):
+    """Colour = (-dir + 1) / 2: shows which view direction the mesher used."""
+
+    def color(self, points, dirs):
+        return ((-dirs + 1.0) * 0.5).clamp(0.0, 1.0)
+
+
+@pytest.mark.parametrize("normals", ["mesh", "gradient"])
+def test_colours_are_seen_along_the_inward_normal(normals):
+    field = _ViewColouredSphere(0.5, center=(0.1, 0.0, 0.0))
+    mesh = extract_mesh(field, res=64, color=True, color_normals=normals, progress=False)
+    rgb = np.asarray(mesh.visual.vertex_colors)[:, :3] / 255.0
+    radial = mesh.vertices - [0.1, 0.0, 0.0]
+    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+    # view = -outward normal, so the colour encodes the outward normal
+    assert np.abs(rgb - (radial + 1) / 2).max() < 0.06
+    assert np.abs(rgb - (radial + 1) / 2).mean() < 0.015

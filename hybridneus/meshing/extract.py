@@ -133,6 +133,71 @@ def _weld_planes(
     return verts[keep], faces
 
 
+def _evaluate_into(
+    field_: Field, grid: VoxelGrid, vol: np.ndarray, mask: np.ndarray, x0: int, chunk: int
+) -> int:
+    """Write the SDF at the slab points where ``mask`` is set into ``vol``; return the count."""
+    flat = np.flatnonzero(mask)
+    if flat.size:
+        ny, nz = vol.shape[1:]
+        ix = flat // (ny * nz)
+        rest = flat - ix * (ny * nz)
+        iy = rest // nz
+        iz = rest - iy * nz
+        del rest
+        vol.reshape(-1)[flat] = evaluate_sdf(field_, grid.points(ix + x0, iy, iz), chunk)
+    return int(flat.size)
+
+
+def _expand(blocks: np.ndarray, axes: Sequence[tuple[np.ndarray, np.ndarray, int]]) -> np.ndarray:
+    """Per grid point: whether any block it belongs to is set (blocks -> points, bool)."""
+    out = blocks
+    for axis in (2, 1, 0):
+        first, second = axes[axis][0], axes[axis][1]
+        out = np.take(out, first, axis=axis) | np.take(out, second, axis=axis)
+    return out
+
+
+def _refine_slab(
+    field_: Field,
+    grid: VoxelGrid,
+    vol: np.ndarray,
+    mask: np.ndarray,
+    x0: int,
+    fill: np.float32,
+    band_safety: float,
+    chunk: int,
+) -> tuple[int, np.ndarray]:
+    """Second narrowing inside the coarse band, with 2 x 2 x 2-voxel blocks.
+
+    Evaluates the band's even-index points, keeps the 2-blocks the surface may cross (same
+    test as the coarse level), evaluates the rest of their points, and fills the band points
+    outside them with their 2-block's sign. Returns (points evaluated, marching-cubes mask).
+    """
+    shape = vol.shape
+    axes = [_block_axes(n, 2) for n in shape]
+    nodes = [_coarse_indices(n, 2, a[2]) for n, a in zip(shape, axes, strict=True)]
+    even = np.zeros(shape, dtype=bool)
+    even[np.ix_(*nodes)] = True
+    even &= mask
+    n_eval = _evaluate_into(field_, grid, vol, even, x0, chunk)
+    corners = vol[np.ix_(*nodes)]
+    half_diag = 0.5 * math.sqrt(3.0) * 2 * grid.voxel
+    active = _active_blocks(corners, half_diag, band_safety, 0)
+    near = _expand(active, axes) & mask
+    n_eval += _evaluate_into(field_, grid, vol, near & ~even, x0, chunk)
+    # Band points in inactive 2-blocks: all corners share a sign, so the block does too.
+    rest = np.flatnonzero(mask & ~near & ~even)
+    if rest.size:
+        ny, nz = shape[1:]
+        bx = axes[0][0][rest // (ny * nz)]
+        by = axes[1][0][(rest // nz) % ny]
+        bz = axes[2][0][rest % nz]
+        sign = np.where(corners[bx, by, bz] < 0.0, -1.0, 1.0).astype(np.float32)
+        vol.reshape(-1)[rest] = sign * fill
+    return n_eval, near
+
+
 def extract_sdf_mesh(
     field_: Field,
     res: int = 300,
@@ -143,6 +208,7 @@ def extract_sdf_mesh(
     coarse_factor: int | None = None,
     band_safety: float = 1.5,
     band_dilate: int = 1,
+    refine: bool = True,
     slab_bytes: int = 256 * 2**20,
     progress: bool = True,
 ) -> tuple[trimesh.Trimesh, VoxelGrid, ExtractionStats]:
@@ -159,6 +225,7 @@ def extract_sdf_mesh(
         coarse_factor: fine voxels per coarse block side; default 4 (8 above res 512).
         band_safety: multiple of the block half diagonal within which a block is kept.
         band_dilate: blocks added around the kept ones.
+        refine: narrow the band once more with 2-voxel blocks (see :func:`_refine_slab`).
         slab_bytes: upper bound on one slab's float32 volume.
         progress: show a progress bar on stderr.
 
@@ -214,7 +281,10 @@ def extract_sdf_mesh(
         # Large enough never to be crossed, small enough to keep float32 interpolation sane.
         fill = np.float32(1e3 * max(grid.voxel, 1e-6))
         plane_bytes = 4 * ny * nz
-        slab = max(1, min(nx - 1, slab_bytes // max(plane_bytes, 1) - 1))
+        # Even slab starts keep the 2-voxel blocks of the refinement on one global lattice.
+        slab = max(2, min(nx - 1, slab_bytes // max(plane_bytes, 1) - 1))
+        if slab < nx - 1:
+            slab -= slab % 2
         all_verts, all_faces, shared, n_verts = [], [], [], 0
         t_eval = t_mc = 0.0
         for x0 in range(0, nx - 1, slab):
@@ -226,21 +296,17 @@ def extract_sdf_mesh(
             mask = np.take(active_yz, fx, axis=0) | np.take(active_yz, sx, axis=0)
             vol = np.take(sign_yz, fx, axis=0)
             vol *= fill
-            flat = np.flatnonzero(mask)
             t1 = time.perf_counter()
-            if flat.size:
-                ix = flat // (ny * nz)
-                rest = flat - ix * (ny * nz)
-                iy = rest // nz
-                iz = rest - iy * nz
-                del rest
-                vol.reshape(-1)[flat] = evaluate_sdf(field_, grid.points(ix + x0, iy, iz), chunk)
-                del ix, iy, iz
+            if narrow_band and refine:
+                n_eval, mask = _refine_slab(
+                    field_, grid, vol, mask, x0, fill, band_safety, chunk
+                )
+            else:
+                n_eval = _evaluate_into(field_, grid, vol, mask, x0, chunk)
             t_eval += time.perf_counter() - t1
-            stats.fine_points += int(flat.size)
+            stats.fine_points += n_eval
             stats.slabs += 1
-            bar.update(task, advance=int(flat.size))
-            del flat
+            bar.update(task, advance=n_eval)
             t1 = time.perf_counter()
             if vol.min() < 0.0 < vol.max():
                 # With inside negative, skimage's "descent" winding gives outward normals
@@ -287,6 +353,7 @@ def extract_mesh(
     postprocess: PostprocessOptions | None = None,
     progress: bool = True,
     stats: ExtractionStats | None = None,
+    color_normals: str = "mesh",
 ) -> trimesh.Trimesh:
     """Extract the zero level of ``field_`` as a triangle mesh in world coordinates.
 
@@ -308,6 +375,8 @@ def extract_mesh(
         postprocess: clean-up options; ``PostprocessOptions(enabled=False)`` for the raw mesh.
         progress: progress bar on stderr.
         stats: if given, filled with counts and timings.
+        color_normals: view direction for colours: ``"mesh"`` (-vertex normal, forward
+            queries only) or ``"gradient"`` (-SDF gradient at each grid corner, slower).
 
     Returns:
         ``trimesh.Trimesh`` with outward normals; ``visual.vertex_colors`` set when ``color``.
@@ -323,6 +392,8 @@ def extract_mesh(
     from hybridneus.meshing.color import to_uint8, vertex_colors
     from hybridneus.meshing.postprocess import postprocess_mesh
 
+    if color_normals not in ("mesh", "gradient"):
+        raise ValueError(f"color_normals {color_normals!r}: expected 'mesh' or 'gradient'")
     options = postprocess if postprocess is not None else PostprocessOptions()
     if crop is not None and options.clip is None and options.enabled:
         options = dataclasses.replace(options, clip=crop)
@@ -336,7 +407,10 @@ def extract_mesh(
     run_stats.times["postprocess"] = time.perf_counter() - t0
     if color and len(mesh.vertices):
         t0 = time.perf_counter()
-        rgb = vertex_colors(field_, np.asarray(mesh.vertices), grid, chunk=min(chunk, 2**16))
+        normals = np.asarray(mesh.vertex_normals) if color_normals == "mesh" else None
+        rgb = vertex_colors(
+            field_, np.asarray(mesh.vertices), grid, normals, chunk=min(chunk, 2**16)
+        )
         mesh = trimesh.Trimesh(
             mesh.vertices, mesh.faces, vertex_colors=to_uint8(rgb), process=False
         )

@@ -1,0 +1,81 @@
+"""Mesh extraction time: analytic field vs an untrained default HybridField, with/without colour.
+
+    python benchmarks/bench_mesh.py                 # res 300 and 512, both fields
+    python benchmarks/bench_mesh.py --quick         # res 128 only, one repeat
+    python benchmarks/bench_mesh.py --res 300 512 1024 --fields analytic
+
+The HybridField stands in for a trained one: same architecture and cost per query (the
+"fast" preset), geometric initialisation (a sphere) cut by the real-scene crop cylinder,
+which gives a surface of similar extent to a real object. Timings are medians over
+--repeats runs after one warm-up; other processes on the machine make them noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import torch
+
+
+def make_field(kind: str):
+    """(field, crop or None) for ``analytic`` or ``hybrid``."""
+    from hybridneus.meshing import CropVolume
+    from hybridneus.model.analytic import TorusField
+
+    if kind == "analytic":
+        return TorusField(0.5, 0.2), None
+    from hybridneus.config import preset_config
+    from hybridneus.model.field import HybridField
+
+    cfg = preset_config("fast")
+    crop = (0.25, -0.35, 0.15)
+    field = HybridField(cfg.grid, cfg.field, background=(0.62, 0.62, 0.62), crop=crop).eval()
+    return field, CropVolume(*crop)
+
+
+def time_once(field, crop, res: int, color: bool) -> tuple[float, dict, int, float]:
+    """(seconds, stage times, faces, active fraction) of one extract_mesh call."""
+    from hybridneus.meshing import ExtractionStats, extract_mesh
+
+    stats = ExtractionStats()
+    start = time.perf_counter()
+    mesh = extract_mesh(field, res=res, crop=crop, color=color, progress=False, stats=stats)
+    return time.perf_counter() - start, dict(stats.times), len(mesh.faces), stats.active_fraction
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--res", type=int, nargs="+", default=[300, 512])
+    parser.add_argument("--fields", nargs="+", default=["analytic", "hybrid"])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    parser.add_argument("--quick", action="store_true", help="res 128, one repeat")
+    args = parser.parse_args()
+    if args.quick:
+        args.res, args.repeats = [128], 1
+    torch.set_num_threads(args.threads)
+    print(f"torch threads {torch.get_num_threads()}; median of {args.repeats} after a warm-up")
+    print("| field | res | colour | seconds | faces | evaluated | coarse | fine | MC | post | colour |"[:99]
+          + "|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for kind in args.fields:
+        field, crop = make_field(kind)
+        time_once(field, crop, 64, True)  # warm-up (imports, allocator, thread pool)
+        for res in args.res:
+            for color in (False, True):
+                runs = [time_once(field, crop, res, color) for _ in range(args.repeats)]
+                seconds = statistics.median(r[0] for r in runs)
+                t = runs[0][1]
+                print(
+                    f"| {kind} | {res} | {'yes' if color else 'no'} | {seconds:.2f} | "
+                    f"{runs[0][2]} | {100 * runs[0][3]:.1f}% | {t.get('coarse', 0):.2f} | "
+                    f"{t.get('fine_eval', 0):.2f} | {t.get('marching_cubes', 0):.2f} | "
+                    f"{t.get('postprocess', 0):.2f} | {t.get('color', 0):.2f} |",
+                    flush=True,
+                )
+
+
+if __name__ == "__main__":
+    main()
