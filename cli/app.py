@@ -29,6 +29,7 @@ _COMMANDS: list[tuple[str, str, str]] = [
     ("simulate", "simulate", "simulate"),
     ("mesh", "mesh", "mesh"),
     ("eval", "evaluate", "evaluate"),
+    ("render", "render", "render"),
 ]
 
 for _name, _module, _func in _COMMANDS:
