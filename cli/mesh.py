@@ -85,15 +85,18 @@ def mesh(
         min_component_faces=min_component_faces or None,
         keep_largest=keep_largest,
         decimate=decimate or None,
-        clip=crop if clip else None,
     )
-    if crop is not None and not clip:
-        # extract_mesh clips to its crop by default; an explicit far cylinder turns that off.
-        options.clip = CropVolume(1e9, -1e9, 1e9)
     stats = ExtractionStats()
     start = time.perf_counter()
     result = extract_mesh(
-        field, res=res, crop=crop, color=color, chunk=chunk, postprocess=options, stats=stats
+        field,
+        res=res,
+        crop=crop,
+        clip=clip,
+        color=color,
+        chunk=chunk,
+        postprocess=options,
+        stats=stats,
     )
     elapsed = time.perf_counter() - start
     if len(result.faces) == 0:

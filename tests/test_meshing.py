@@ -75,6 +75,8 @@ def test_bounds_and_crop_select_the_world_volume():
     assert cut.area == pytest.approx(2 * np.pi * 0.3 * (0.2 - 0.3 + 0.3 - np.sqrt(0.09 - 0.0625)
                                                           + 0.3 - np.sqrt(0.09 - 0.0625)), rel=0.1)
     assert cut.area < 0.5 * whole.area
+    unclipped = extract_mesh(SphereField(0.3), res=64, crop=crop, clip=False, progress=False)
+    assert unclipped.area > 1.5 * cut.area  # the crop's box only, not the cylinder
     assert v[:, 1].min() < -0.2 and v[:, 1].max() > 0.15
     voxel = 2 * 0.25 * 1.02 / 63
     assert (v[:, 0] ** 2 + v[:, 2] ** 2 <= (0.25 + voxel) ** 2).all()

@@ -347,6 +347,7 @@ def extract_mesh(
     res: int = 300,
     bounds: Bounds | None = None,
     crop: CropVolume | None = None,
+    clip: bool = True,
     color: bool = False,
     chunk: int = 2**18,
     narrow_band: bool = True,
@@ -367,8 +368,8 @@ def extract_mesh(
             :class:`~hybridneus.model.analytic.SphereField`).
         res: grid points along the longest side of the volume.
         bounds: world box ((x0, y0, z0), (x1, y1, z1)); default [-1, 1]^3 or the crop's box.
-        crop: crop cylinder; meshes its bounding box and, when ``postprocess.clip`` is None,
-            clips the mesh to it.
+        crop: crop cylinder; its (padded) box is meshed when ``bounds`` is not given.
+        clip: clip the mesh to ``crop`` (when ``postprocess.clip`` is None).
         color: attach uint8 vertex colours.
         chunk: points per field query.
         narrow_band: evaluate the fine grid only near the surface.
@@ -395,7 +396,7 @@ def extract_mesh(
     if color_normals not in ("mesh", "gradient"):
         raise ValueError(f"color_normals {color_normals!r}: expected 'mesh' or 'gradient'")
     options = postprocess if postprocess is not None else PostprocessOptions()
-    if crop is not None and options.clip is None and options.enabled:
+    if clip and crop is not None and options.clip is None and options.enabled:
         options = dataclasses.replace(options, clip=crop)
     mesh, grid, run_stats = extract_sdf_mesh(
         field_, res, bounds, crop, chunk=chunk, narrow_band=narrow_band, progress=progress
