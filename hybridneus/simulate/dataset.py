@@ -191,8 +191,7 @@ def _simulate_split(name: str, traj: Trajectory, renderer: Renderer, config: Sim
         t0 = time.perf_counter()
         frames, _ = renderer.render(c2w[start:stop])
         t1 = time.perf_counter()
-        for i, frame in enumerate(frames):
-            k = start + i
+        for frame in frames:
             if sim is None:
                 sim = EventSimulator(frame, config.events, config.noise, seed=seed)
             else:
