@@ -173,45 +173,70 @@ def _write_matrix(path: Path, matrix: np.ndarray) -> None:
     np.savetxt(path, matrix, fmt="%.10g")
 
 
-def _simulate_split(name: str, traj: Trajectory, renderer: Renderer, config: SimulationConfig,
-                    split_dir: Path, seed: int, progress=None, task=None) -> SplitResult:
-    import cv2
+class _FrameConsumer:
+    """Turns rendered batches into events and files; runs beside the renderer in a thread."""
 
-    camera = renderer.camera
-    c2w = look_at_origin(traj.directions, traj.azimuth, config.camera_radius)
-    for sub in ("intrinsics", "pose", "rgb", "events"):
-        (split_dir / sub).mkdir(parents=True, exist_ok=True)
-    intr = _intrinsics_matrix(camera)
-    n = traj.n_views
-    chunks: list[EventChunk] = []
-    sim: EventSimulator | None = None
-    render_s = events_s = write_s = 0.0
-    for start in range(0, n, config.batch_views):
-        stop = min(n, start + config.batch_views)
-        t0 = time.perf_counter()
-        frames, _ = renderer.render(c2w[start:stop])
+    def __init__(self, split_dir: Path, c2w: np.ndarray, intr: np.ndarray,
+                 config: SimulationConfig, seed: int) -> None:
+        self.split_dir, self.c2w, self.intr = split_dir, c2w, intr
+        self.config, self.seed = config, seed
+        self.sim: EventSimulator | None = None
+        self.chunks: list[EventChunk] = []
+        self.n_events = 0
+        self.events_s = self.write_s = 0.0
+
+    def __call__(self, start: int, frames: np.ndarray) -> None:
+        import cv2
+
         t1 = time.perf_counter()
         for frame in frames:
-            if sim is None:
-                sim = EventSimulator(frame, config.events, config.noise, seed=seed)
+            if self.sim is None:
+                self.sim = EventSimulator(frame, self.config.events, self.config.noise,
+                                          seed=self.seed)
             else:
-                chunks.append(sim.step(frame))
+                self.chunks.append(self.sim.step(frame))
+                self.n_events += len(self.chunks[-1])
         t2 = time.perf_counter()
         for i, frame in enumerate(frames):
             k = start + i
-            _write_matrix(split_dir / "intrinsics" / f"r_{k:05d}.txt", intr)
-            _write_matrix(split_dir / "pose" / f"r_{k:05d}.txt", c2w[k])
-            if config.write_rgb:
+            _write_matrix(self.split_dir / "intrinsics" / f"r_{k:05d}.txt", self.intr)
+            _write_matrix(self.split_dir / "pose" / f"r_{k:05d}.txt", self.c2w[k])
+            if self.config.write_rgb:
                 img = np.round(frame * 255.0).astype(np.uint8)
-                cv2.imwrite(str(split_dir / "rgb" / f"r_{k:05d}.png"), img[..., ::-1],
+                cv2.imwrite(str(self.split_dir / "rgb" / f"r_{k:05d}.png"), img[..., ::-1],
                             [cv2.IMWRITE_PNG_COMPRESSION, 1])
-        t3 = time.perf_counter()
-        render_s += t1 - t0
-        events_s += t2 - t1
-        write_s += t3 - t2
-        if progress is not None:
-            progress.update(task, advance=stop - start,
-                            info=f"{name}: {sum(len(c) for c in chunks):,} events")
+        self.events_s += t2 - t1
+        self.write_s += time.perf_counter() - t2
+
+
+def _simulate_split(name: str, traj: Trajectory, renderer: Renderer, config: SimulationConfig,
+                    split_dir: Path, seed: int, progress=None, task=None) -> SplitResult:
+    from concurrent.futures import ThreadPoolExecutor
+
+    c2w = look_at_origin(traj.directions, traj.azimuth, config.camera_radius)
+    for sub in ("intrinsics", "pose", "rgb", "events"):
+        (split_dir / sub).mkdir(parents=True, exist_ok=True)
+    n = traj.n_views
+    consumer = _FrameConsumer(split_dir, c2w, _intrinsics_matrix(renderer.camera), config, seed)
+    render_s = 0.0
+    # Batch b is turned into events and files while batch b + 1 renders (numpy, OpenCV and
+    # Open3D release the GIL in their heavy parts); at most one batch waits at a time.
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = None
+        for start in range(0, n, config.batch_views):
+            stop = min(n, start + config.batch_views)
+            t0 = time.perf_counter()
+            frames, _ = renderer.render(c2w[start:stop])
+            render_s += time.perf_counter() - t0
+            if pending is not None:
+                pending.result()
+            pending = pool.submit(consumer, start, frames)
+            if progress is not None:
+                progress.update(task, advance=stop - start,
+                                info=f"{name}: {consumer.n_events:,} events")
+        pending.result()
+    chunks = consumer.chunks
+    events_s, write_s = consumer.events_s, consumer.write_s
     if not chunks or len(chunks[-1]) == 0:
         raise SimulationError(
             f"{name}: no events in the final frame interval ({n - 2} -> {n - 1}); the reader "
