@@ -30,6 +30,7 @@ _COMMANDS: list[tuple[str, str, str]] = [
     ("mesh", "mesh", "mesh"),
     ("eval", "evaluate", "evaluate"),
     ("render", "render", "render"),
+    ("demo", "demo", "demo"),
 ]
 
 for _name, _module, _func in _COMMANDS:
