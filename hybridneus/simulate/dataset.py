@@ -297,7 +297,9 @@ def simulate_dataset(
         for si, (name, traj) in enumerate(trajs.items()):
             results.append(_simulate_split(name, traj, renderer, config, tmp / name,
                                            seed=config.seed * 1000 + si, progress=bar, task=task))
-        world.to_trimesh().export(tmp / "gt_mesh.ply")
+        gt = world.to_trimesh()
+        gt.merge_vertices()  # seams of separately built parts: watertight where it can be
+        gt.export(tmp / "gt_mesh.ply")
         info = _scene_json(config, source_mesh, scene_name, norm, camera, shading, results,
                            (crop_r, crop_y0, crop_y1), time.perf_counter() - started)
         (tmp / "scene.json").write_text(json.dumps(info, indent=2) + "\n")
