@@ -233,3 +233,10 @@ def test_fast_shading_matches_reference():
     assert (mesh.face_texture[prim] >= 0).any() and r._face_varying[prim].any()
     fast = r._shade(prim, bary, normals, dirs)
     np.testing.assert_allclose(fast, _shade_reference(r, prim, bary, normals, dirs), atol=2e-5)
+
+
+def test_public_names_resolve():
+    import hybridneus.simulate as sim
+
+    for name in sim.__all__:
+        assert getattr(sim, name) is not None, name
