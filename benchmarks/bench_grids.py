@@ -2,7 +2,7 @@
 
 Compares, in one run and on the same inputs:
   ours     hybridneus.grids.HashGrid (per-level tables, complex pairs, custom autograd)
-  ours-i32 the same with int32 row indices
+  ours-i64 the same with int64 row indices (int32 is the default)
   flat     a straightforward version: one flat table, all levels broadcast, int64 table[idx]
   floor    only the memory traffic: index_select (+ scatter_add_) of the same number of rows
 
@@ -108,11 +108,16 @@ def bench_case(log2_t: int, log2_n: int, impls: list[str], args: argparse.Namesp
     for impl in impls:
         if impl == "ours":
             runners[impl] = lambda m, g=grid: run_mode(g, x, m)
-        elif impl == "ours-i32":
-            g32 = HashGrid(log2_hashmap_size=log2_t).to(device)
-            g32.load_state_dict(grid.state_dict())
-            g32.index_dtype = torch.int32
-            runners[impl] = lambda m, g=g32: run_mode(g, x, m)
+        elif impl == "ours-i64":
+            g64 = HashGrid(log2_hashmap_size=log2_t).to(device)
+            g64.load_state_dict(grid.state_dict())
+            g64.index_dtype = torch.int64
+            runners[impl] = lambda m, g=g64: run_mode(g, x, m)
+        elif impl.startswith("ours-chunk"):
+            gc = HashGrid(log2_hashmap_size=log2_t).to(device)
+            gc.load_state_dict(grid.state_dict())
+            gc.chunk_size = 2 ** int(impl.removeprefix("ours-chunk"))
+            runners[impl] = lambda m, g=gc: run_mode(g, x, m)
         elif impl == "flat":
             flat = FlatHashGrid(grid).to(device)
             runners[impl] = lambda m, g=flat: run_mode(g, x, m)
@@ -152,8 +157,8 @@ def main() -> None:
     ap.add_argument("--log2-n", type=int, nargs="+", help="batch sizes (log2); quick: 16 18")
     ap.add_argument("--full", action="store_true", help="T 2^15..2^19 x N 2^14..2^18")
     ap.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES)
-    ap.add_argument("--impl", nargs="+", default=["ours", "ours-i32", "flat", "floor"],
-                    help="ours ours-i32 flat floor compiled-ours")
+    ap.add_argument("--impl", nargs="+", default=["ours", "ours-i64", "flat", "floor"],
+                    help="ours ours-i64 ours-chunk<log2> flat floor compiled-ours")
     ap.add_argument("--repeats", type=int, default=5, help="timed repeats (median); default 5")
     ap.add_argument("--flat-max-log2-n", type=int, default=18,
                     help="skip the slow flat version above this batch size")

@@ -83,9 +83,11 @@ def scatter_rows(src: torch.Tensor, idx: torch.Tensor, size: int) -> torch.Tenso
 def _to_rows(flat: torch.Tensor, n_features: int) -> torch.Tensor:
     """Real (..., n * F) -> the gathered-row layout: complex pairs for even F, else real.
 
-    (rows,) for F in (1, 2); (rows, F // 2) complex for even F > 2; (rows, F) for odd F > 1.
+    On CPU: (rows,) for F in (1, 2); (rows, F // 2) complex for even F > 2; (rows, F) for
+    odd F > 1. On CUDA always real: (rows,) for F = 1, else (rows, F).
     """
-    if n_features % 2 == 0:
+    if n_features % 2 == 0 and not flat.is_cuda:
+        # CUDA atomics on real rows beat complex ones; the CPU kernels prefer one 8-byte item.
         c = torch.view_as_complex(flat.reshape(-1, n_features // 2, 2))
         return c.squeeze(-1) if n_features == 2 else c
     return flat.reshape(-1) if n_features == 1 else flat.reshape(-1, n_features)
@@ -134,18 +136,41 @@ class _GatherLevels(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, *grads: torch.Tensor):
-        # Differentiable ops only (stack, _Scatter), so this pass can be differentiated.
+        # Differentiable ops only (_ScatterCorners), so this pass can be differentiated.
         (idx,) = ctx.saved_tensors
-        grad = torch.stack(grads, dim=1)  # (n_levels, 8, n * F)
-        n_features = grad.shape[-1] // idx.shape[-1]
+        n_features = grads[0].shape[-1] // idx.shape[-1]
         out = []
         for lvl, size in enumerate(ctx.sizes):
             if not ctx.needs_input_grad[lvl + 1]:
                 out.append(None)
                 continue
-            src = _to_rows(grad[lvl], n_features)
-            out.append(_to_flat(_Scatter.apply(src, idx[lvl].reshape(-1), size), size))
+            srcs = [g[lvl] for g in grads]
+            rows = _ScatterCorners.apply(idx[lvl], size, n_features, *srcs)
+            out.append(_to_flat(rows, size))
         return None, *out
+
+
+class _ScatterCorners(torch.autograd.Function):
+    """rows = zeros(size); rows[idx[c]] += src_c for the 8 corners of one level.
+
+    Scattering corner by corner avoids stacking the 8 gradients into one buffer.
+    """
+
+    @staticmethod
+    def forward(ctx, idx: torch.Tensor, size: int, n_features: int, *srcs: torch.Tensor):
+        first = _to_rows(srcs[0].contiguous(), n_features)
+        out = first.new_zeros((size, *first.shape[1:]))
+        for c, src in enumerate(srcs):
+            out.index_add_(0, idx[c], _to_rows(src.contiguous(), n_features))
+        ctx.save_for_backward(idx)
+        ctx.n_features = n_features
+        return out
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        (idx,) = ctx.saved_tensors
+        gathered = [_to_flat(_Gather.apply(grad, idx[c]), 1).view(-1) for c in range(8)]
+        return None, None, None, *gathered
 
 
 def gather_levels(tables: list[torch.Tensor], idx: torch.Tensor) -> tuple[torch.Tensor, ...]:

@@ -37,10 +37,13 @@ class _MultiresGrid(nn.Module):
         self.n_features_per_level = n_features_per_level
         self.out_dim = self.n_levels * n_features_per_level
         self.active_levels = self.n_levels
-        #: Row-index dtype; int64 lets the backward use the fast 1-D ``scatter_add_``.
-        self.index_dtype = torch.int64
-        #: Points per chunk: bounds the (n_levels, 8, chunk * F) temporaries.
-        self.chunk_size = 2**16
+        #: Row-index dtype: int32 halves the index traffic (measured faster on CPU, see
+        #: docs/benchmarks/grids.md); int64 gives identical rows.
+        self.index_dtype = torch.int32
+        #: Points per chunk, bounding the (n_levels, 8, chunk * F) temporaries; None picks
+        #: 2**14 (CPU, no autograd), 2**16 (CPU, autograd) or 2**20 (CUDA) as measured in
+        #: docs/benchmarks/grids.md.
+        self.chunk_size: int | None = None
         # Coarse levels are dense and fine ones hashed (side grows with the level).
         self.n_dense = sum(not lvl.hashed for lvl in levels)
         if any(lvl.hashed for lvl in levels[: self.n_dense]):
@@ -102,14 +105,14 @@ class _MultiresGrid(nn.Module):
         dtype = self.index_dtype
         ic = cell.to(dtype)
         n_dense = min(self.n_dense, n_act)
-        parts = []
+        idx = torch.empty(n_act, 8, n, dtype=dtype, device=xt.device)
         if n_dense:
             sides = self._sides[:n_dense].to(dtype).view(n_dense, 1)
             # Points outside [0, 1]^3 are clamped to the border cell so rows stay in range.
             icd = torch.minimum(ic[:n_dense].clamp_min(0), (sides - 2).unsqueeze(-1))
             base = icd[:, 0] + icd[:, 1] * sides + icd[:, 2] * (sides * sides)
             offsets = self._dense_offsets[:n_dense].to(dtype).unsqueeze(-1)
-            parts.append(base.unsqueeze(1) + offsets)
+            torch.add(base.unsqueeze(1), offsets, out=idx[:n_dense])
         n_hash = n_act - n_dense
         if n_hash:
             ich = ic[n_dense:]
@@ -123,9 +126,7 @@ class _MultiresGrid(nn.Module):
             hy = torch.stack((iy, iy + p1), dim=1) & masks
             hz = torch.stack((iz, iz + p2), dim=1) & masks
             h = (hz.view(n_hash, 2, 1, n) ^ hy.view(n_hash, 1, 2, n)).view(n_hash, 4, 1, n)
-            h = (h ^ hx.view(n_hash, 1, 2, n)).view(n_hash, 8, n)
-            parts.append(h)
-        idx = parts[0] if len(parts) == 1 else torch.cat(parts)
+            torch.bitwise_xor(h, hx.view(n_hash, 1, 2, n), out=idx[n_dense:].view(n_hash, 4, 2, n))
         return idx, frac
 
     def _encode(self, xt: torch.Tensor) -> torch.Tensor:
@@ -168,7 +169,15 @@ class _MultiresGrid(nn.Module):
         n = xt.shape[1]
         if n == 0:
             return xt.new_zeros(*batch, self.out_dim)
-        chunk = max(1, int(self.chunk_size))
+        chunk = self.chunk_size
+        if chunk is None:
+            if xt.is_cuda:
+                chunk = 2**20
+            elif torch.is_grad_enabled() and (xt.requires_grad or self.tables[0].requires_grad):
+                chunk = 2**16
+            else:
+                chunk = 2**14
+        chunk = max(1, int(chunk))
         if n <= chunk:
             out = self._encode(xt)
         else:

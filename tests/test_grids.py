@@ -290,6 +290,7 @@ def test_float32_matches_float64_and_casts_input():
 def test_int32_indices_and_chunking_match():
     grid = HashGrid(6, 2, 12, 4, 256)
     x = torch.rand(500, 3, requires_grad=True)
+    grid.index_dtype = torch.int64
     ref = grid(x)
     (gx_ref,) = torch.autograd.grad(ref.square().sum(), x)
     grid.index_dtype = torch.int32
