@@ -44,6 +44,8 @@ def _score(field, gt_path: Path, res: int) -> dict:
     t = time.perf_counter()
     mesh = extract_mesh(field, res=res, progress=False)
     t_mesh = time.perf_counter() - t
+    if len(mesh.faces) == 0:
+        return {"chamfer": None, "faces": 0, "mesh_s": round(t_mesh, 1)}
     gt = load_mesh(gt_path)
     cd = chamfer_distance(mesh, gt)
     return {"chamfer": cd.chamfer, "fscore": cd.fscore, "faces": int(len(mesh.faces)),
@@ -66,6 +68,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("/tmp/hybridneus-bench/runs"))
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--run", type=Path, help="score this run folder instead of fitting")
+    ap.add_argument("--gt", type=Path, help="ground-truth mesh (default: the dataset's)")
     ap.add_argument("--fit-only", action="store_true", help="train and save, do not score")
     ap.add_argument("--quick", action="store_true",
                     help="builtin:device, 120 views at 173x130, 2 minutes")
@@ -113,7 +116,8 @@ def main() -> None:
         from hybridneus.config import load_config
 
         cfg = load_config(run_dir / "config.yaml")
-        gt = Path(cfg.data.path) / "gt_mesh.ply"
+        report.update(dataset=cfg.data.path, preset=cfg.preset)
+        gt = args.gt or Path(cfg.data.path) / "gt_mesh.ply"
         field = load_field(run_dir, device="cpu")
         report["trained"] = _score(field, gt, args.res)
         from hybridneus.training.runs import build_field, load_checkpoint

@@ -131,6 +131,7 @@ class HybridField(nn.Module):
         radius = min(field.init_radius, 0.9 * float(crop[0]))
         geometric_init_(self.sdf_net, n_inputs_xyz=3, radius=radius, skips=field.sdf_skip)
         self.init_radius = radius
+        self._center_sphere()
         self.sh = SphericalHarmonics(field.sh_degree)
         self.color_pe: nn.Module | None = None
         color_in = self.sh.out_dim + 3 + field.feature_dim
@@ -332,6 +333,20 @@ class HybridField(nn.Module):
 
     # ------------------------------------------------------------------ init
 
+    @torch.no_grad()
+    def _center_sphere(self, n: int = 512) -> None:
+        """Shift the SDF output so that its mean on the init sphere is 0.
+
+        Geometric init gives ``|x| - r`` only up to an offset that grows with depth (the
+        8-layer head misses a small crop sphere entirely without this).
+        """
+        gen = torch.Generator().manual_seed(0)
+        dirs = torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1)
+        if self.grid_config.kind == "frequency":
+            self.encoding.update_step(0)
+        offset = self.sdf_and_features(dirs * self.init_radius)[0].mean()
+        self.sdf_net.layers[-1].bias[0] -= offset
+
     def prefit_sphere(self, steps: int, n_points: int = 4096, seed: int = 0) -> float:
         """Fit the SDF head to the initial sphere for ``steps`` Adam steps; return the MSE."""
         gen = torch.Generator().manual_seed(seed)
@@ -345,4 +360,4 @@ class HybridField(nn.Module):
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-        return float(loss)
+        return float(loss.detach())
