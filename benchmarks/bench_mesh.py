@@ -45,6 +45,22 @@ def time_once(field, crop, res: int, color: bool) -> tuple[float, dict, int, flo
     return time.perf_counter() - start, dict(stats.times), len(mesh.faces), stats.active_fraction
 
 
+def query_cost(field, n: int = 2**16) -> tuple[float, float]:
+    """Microseconds per point of ``field.sdf`` and of ``field.color`` (median of 3)."""
+    pts = (torch.rand(n, 3) - 0.5) * 0.5
+    dirs = torch.nn.functional.normalize(torch.randn(n, 3), dim=-1)
+    out = []
+    for fn in (lambda: field.sdf(pts), lambda: field.color(pts, dirs)):
+        times = []
+        for _ in range(3):
+            start = time.perf_counter()
+            with torch.no_grad():
+                fn()
+            times.append(time.perf_counter() - start)
+        out.append(1e6 * statistics.median(times) / n)
+    return out[0], out[1]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--res", type=int, nargs="+", default=[300, 512])
@@ -57,12 +73,14 @@ def main() -> None:
         args.res, args.repeats = [128], 1
     torch.set_num_threads(args.threads)
     print(f"torch threads {torch.get_num_threads()}; median of {args.repeats} after a warm-up")
-    print("| field | res | colour | seconds | faces | evaluated | coarse | fine | MC | post | colour |"[:99]
-          + "|")
+    print("| field | res | colour | seconds | faces | evaluated |", end="")
+    print(" coarse | fine | MC | post | colour |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for kind in args.fields:
         field, crop = make_field(kind)
         time_once(field, crop, 64, True)  # warm-up (imports, allocator, thread pool)
+        sdf_us, color_us = query_cost(field)
+        print(f"<!-- {kind}: sdf {sdf_us:.2f} us/point, color {color_us:.2f} us/point -->")
         for res in args.res:
             for color in (False, True):
                 runs = [time_once(field, crop, res, color) for _ in range(args.repeats)]
