@@ -313,6 +313,8 @@ def apply_overrides(cfg: Config, overrides: typing.Iterable[str]) -> Config:
             raise ConfigError(f"--set {item}: expected key=value, e.g. train.lr=0.005")
         key, text = item.split("=", 1)
         key = key.strip()
+        if key == "preset":
+            raise ConfigError("preset: choose it with --preset (or a Config), not --set")
         try:
             value = yaml.safe_load(text) if text.strip() else ""
         except yaml.YAMLError:

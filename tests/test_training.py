@@ -177,3 +177,13 @@ def test_cli_fit_writes_a_run_and_latest(scene, tmp_path):
 
 def tiny_overrides(*extra: str) -> list[str]:
     return [*TINY, *extra]
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_fit_runs_on_cuda(scene, tmp_path):
+    field = fit(scene, tiny("train.iters=4"), out=tmp_path, device="cuda")
+    assert field.device.type == "cuda"
+    loaded = load_field(field.run_dir, device="cpu")
+    pts = np.random.default_rng(0).uniform(-0.3, 0.3, (20, 3)).astype(np.float32)
+    assert np.allclose(loaded.sdf(pts), field.sdf(pts), atol=1e-4)

@@ -236,7 +236,7 @@ class Trainer:
                 "lr": cfg.train.lr * factor,
                 "levels": float(self.field.active_levels()),
                 "occupied": self.occupied_fraction,
-                "opacity": float(out.opacity.mean()),
+                "opacity": float(out.opacity.detach().mean()),
                 "step_seconds": seconds,
             }
         )
