@@ -187,3 +187,21 @@ def test_colours_are_seen_along_the_inward_normal(normals):
     # view = -outward normal, so the colour encodes the outward normal
     assert np.abs(rgb - (radial + 1) / 2).max() < 0.06
     assert np.abs(rgb - (radial + 1) / 2).mean() < 0.015
+
+
+class _HalfNanSphere(SphereField):
+    """A sphere whose SDF is NaN for z > 0.4 (as a diverged field might be somewhere)."""
+
+    def _sdf(self, points):
+        d = super()._sdf(points)
+        return torch.where(points[:, 2] > 0.4, torch.full_like(d, float("nan")), d)
+
+
+def test_non_finite_sdf_values_warn_and_count_as_outside():
+    with pytest.warns(RuntimeWarning, match="non-finite"):
+        mesh = extract_mesh(_HalfNanSphere(0.5), res=48, progress=False)
+    # the NaN region acts as empty space: the sphere is cut flat near z = 0.4, still closed
+    voxel = 2 / 47
+    assert len(mesh.faces) > 1000 and mesh.is_watertight
+    assert mesh.vertices[:, 2].max() < 0.4 + voxel
+    assert mesh.vertices[:, 2].max() > 0.4 - voxel

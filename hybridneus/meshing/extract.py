@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -134,9 +135,19 @@ def _weld_planes(
 
 
 def _evaluate_into(
-    field_: Field, grid: VoxelGrid, vol: np.ndarray, mask: np.ndarray, x0: int, chunk: int
+    field_: Field,
+    grid: VoxelGrid,
+    vol: np.ndarray,
+    mask: np.ndarray,
+    x0: int,
+    chunk: int,
+    fill: np.float32,
 ) -> int:
-    """Write the SDF at the slab points where ``mask`` is set into ``vol``; return the count."""
+    """Write the SDF at the slab points where ``mask`` is set into ``vol``; return the count.
+
+    Non-finite values (a diverged field) count as outside (+``fill``), with a warning, so
+    that marching cubes still runs and the rest of the surface is kept.
+    """
     flat = np.flatnonzero(mask)
     if flat.size:
         ny, nz = vol.shape[1:]
@@ -145,7 +156,16 @@ def _evaluate_into(
         iy = rest // nz
         iz = rest - iy * nz
         del rest
-        vol.reshape(-1)[flat] = evaluate_sdf(field_, grid.points(ix + x0, iy, iz), chunk)
+        values = evaluate_sdf(field_, grid.points(ix + x0, iy, iz), chunk)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            warnings.warn(
+                f"field returned {int(bad.sum())} non-finite SDF values; treated as outside",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            values[bad] = fill
+        vol.reshape(-1)[flat] = values
     return int(flat.size)
 
 
@@ -180,12 +200,12 @@ def _refine_slab(
     even = np.zeros(shape, dtype=bool)
     even[np.ix_(*nodes)] = True
     even &= mask
-    n_eval = _evaluate_into(field_, grid, vol, even, x0, chunk)
+    n_eval = _evaluate_into(field_, grid, vol, even, x0, chunk, fill)
     corners = vol[np.ix_(*nodes)]
     half_diag = 0.5 * math.sqrt(3.0) * 2 * grid.voxel
     active = _active_blocks(corners, half_diag, band_safety, 0)
     near = _expand(active, axes) & mask
-    n_eval += _evaluate_into(field_, grid, vol, near & ~even, x0, chunk)
+    n_eval += _evaluate_into(field_, grid, vol, near & ~even, x0, chunk, fill)
     # Band points in inactive 2-blocks: all corners share a sign, so the block does too.
     rest = np.flatnonzero(mask & ~near & ~even)
     if rest.size:
@@ -302,7 +322,7 @@ def extract_sdf_mesh(
                     field_, grid, vol, mask, x0, fill, band_safety, chunk
                 )
             else:
-                n_eval = _evaluate_into(field_, grid, vol, mask, x0, chunk)
+                n_eval = _evaluate_into(field_, grid, vol, mask, x0, chunk, fill)
             t_eval += time.perf_counter() - t1
             stats.fine_points += n_eval
             stats.slabs += 1
