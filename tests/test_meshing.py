@@ -83,10 +83,13 @@ def test_bounds_and_crop_select_the_world_volume():
     assert v[:, 1].min() >= -0.3 - voxel and v[:, 1].max() <= 0.2 + voxel
 
 
-def test_narrow_band_gives_the_full_grid_mesh():
+@pytest.mark.parametrize("coarse, refine", [(8, True), (4, True), (16, True), (4, False)])
+def test_narrow_band_gives_the_full_grid_mesh(coarse, refine):
     field = TorusField(0.45, 0.15)
     full, _, full_stats = extract_sdf_mesh(field, res=72, narrow_band=False, progress=False)
-    band, _, band_stats = extract_sdf_mesh(field, res=72, narrow_band=True, progress=False)
+    band, _, band_stats = extract_sdf_mesh(
+        field, res=72, coarse_factor=coarse, refine=refine, progress=False
+    )
     assert band_stats.fine_points < 0.5 * full_stats.fine_points
     assert len(band.vertices) == len(full.vertices) and len(band.faces) == len(full.faces)
     d1, _ = cKDTree(full.vertices).query(band.vertices)

@@ -187,35 +187,46 @@ def _refine_slab(
     fill: np.float32,
     band_safety: float,
     chunk: int,
+    coarse: int,
 ) -> tuple[int, np.ndarray]:
-    """Second narrowing inside the coarse band, with 2 x 2 x 2-voxel blocks.
+    """Narrow the coarse band level by level, halving the block size down to 2 voxels.
 
-    Evaluates the band's even-index points, keeps the 2-blocks the surface may cross (same
-    test as the coarse level), evaluates the rest of their points, and fills the band points
-    outside them with their 2-block's sign. Returns (points evaluated, marching-cubes mask).
+    At each level (block side s = coarse / 2, ..., 2) the band points on the stride-s lattice
+    are evaluated, the s-blocks the surface may cross are kept (same test as the coarse
+    level), and the band points of dropped s-blocks are filled with their block's sign; the
+    last level's kept blocks are evaluated in full. ``x0`` must be a multiple of ``coarse``
+    so that the lattices line up across slabs. Returns (points evaluated, marching-cubes mask).
     """
     shape = vol.shape
-    axes = [_block_axes(n, 2) for n in shape]
-    nodes = [_coarse_indices(n, 2, a[2]) for n, a in zip(shape, axes, strict=True)]
-    even = np.zeros(shape, dtype=bool)
-    even[np.ix_(*nodes)] = True
-    even &= mask
-    n_eval = _evaluate_into(field_, grid, vol, even, x0, chunk, fill)
-    corners = vol[np.ix_(*nodes)]
-    half_diag = 0.5 * math.sqrt(3.0) * 2 * grid.voxel
-    active = _active_blocks(corners, half_diag, band_safety, 0)
-    near = _expand(active, axes) & mask
-    n_eval += _evaluate_into(field_, grid, vol, near & ~even, x0, chunk, fill)
-    # Band points in inactive 2-blocks: all corners share a sign, so the block does too.
-    rest = np.flatnonzero(mask & ~near & ~even)
-    if rest.size:
-        ny, nz = shape[1:]
-        bx = axes[0][0][rest // (ny * nz)]
-        by = axes[1][0][(rest // nz) % ny]
-        bz = axes[2][0][rest % nz]
-        sign = np.where(corners[bx, by, bz] < 0.0, -1.0, 1.0).astype(np.float32)
-        vol.reshape(-1)[rest] = sign * fill
-    return n_eval, near
+    ny, nz = shape[1:]
+    done = np.zeros(shape, dtype=bool)
+    n_eval = 0
+    step = coarse // 2
+    while step >= 2:
+        axes = [_block_axes(n, step) for n in shape]
+        nodes = [_coarse_indices(n, step, a[2]) for n, a in zip(shape, axes, strict=True)]
+        lattice = np.zeros(shape, dtype=bool)
+        lattice[np.ix_(*nodes)] = True
+        todo = lattice & mask & ~done
+        n_eval += _evaluate_into(field_, grid, vol, todo, x0, chunk, fill)
+        done |= todo
+        del lattice, todo
+        corners = vol[np.ix_(*nodes)]
+        half_diag = 0.5 * math.sqrt(3.0) * step * grid.voxel
+        active = _active_blocks(corners, half_diag, band_safety, 0)
+        near = _expand(active, axes) & mask
+        # Band points of dropped blocks: all corners share a sign, so the block does too.
+        rest = np.flatnonzero(mask & ~near & ~done)
+        if rest.size:
+            bx = axes[0][0][rest // (ny * nz)]
+            by = axes[1][0][(rest // nz) % ny]
+            bz = axes[2][0][rest % nz]
+            sign = np.where(corners[bx, by, bz] < 0.0, -1.0, 1.0).astype(np.float32)
+            vol.reshape(-1)[rest] = sign * fill
+        mask = near
+        step //= 2
+    n_eval += _evaluate_into(field_, grid, vol, mask & ~done, x0, chunk, fill)
+    return n_eval, mask
 
 
 def extract_sdf_mesh(
@@ -242,10 +253,11 @@ def extract_sdf_mesh(
         crop: crop cylinder whose box is meshed when ``bounds`` is not given.
         chunk: points per field query (bounds peak memory of the field).
         narrow_band: evaluate only blocks near the zero level (see module docstring).
-        coarse_factor: fine voxels per coarse block side; default 4 (8 above res 512).
+        coarse_factor: fine voxels per coarse block side (power of two); default 8 (4 with
+            ``refine=False``).
         band_safety: multiple of the block half diagonal within which a block is kept.
         band_dilate: blocks added around the kept ones.
-        refine: narrow the band once more with 2-voxel blocks (see :func:`_refine_slab`).
+        refine: narrow the band level by level down to 2-voxel blocks (:func:`_refine_slab`).
         slab_bytes: upper bound on one slab's float32 volume.
         progress: show a progress bar on stderr.
 
@@ -260,7 +272,9 @@ def extract_sdf_mesh(
         bounds = crop.padded_bounds() if crop is not None else DEFAULT_BOUNDS
     grid = VoxelGrid.from_bounds(bounds, res)
     nx, ny, nz = grid.shape
-    block = coarse_factor or (4 if res <= 512 else 8)
+    block = coarse_factor or (8 if refine else 4)
+    if narrow_band and refine and (block < 2 or block & (block - 1)):
+        raise ValueError(f"coarse_factor {block}: must be a power of two with refine=True")
     stats = ExtractionStats(grid_shape=grid.shape, voxel=grid.voxel)
 
     axes = [_block_axes(n, block) for n in grid.shape]
@@ -301,10 +315,11 @@ def extract_sdf_mesh(
         # Large enough never to be crossed, small enough to keep float32 interpolation sane.
         fill = np.float32(1e3 * max(grid.voxel, 1e-6))
         plane_bytes = 4 * ny * nz
-        # Even slab starts keep the 2-voxel blocks of the refinement on one global lattice.
+        # Slab starts on multiples of the coarse block keep every refinement level's blocks on
+        # one global lattice.
         slab = max(2, min(nx - 1, slab_bytes // max(plane_bytes, 1) - 1))
         if slab < nx - 1:
-            slab -= slab % 2
+            slab = max(block, slab - slab % block)
         all_verts, all_faces, shared, n_verts = [], [], [], 0
         t_eval = t_mc = 0.0
         for x0 in range(0, nx - 1, slab):
@@ -319,7 +334,7 @@ def extract_sdf_mesh(
             t1 = time.perf_counter()
             if narrow_band and refine:
                 n_eval, mask = _refine_slab(
-                    field_, grid, vol, mask, x0, fill, band_safety, chunk
+                    field_, grid, vol, mask, x0, fill, band_safety, chunk, block
                 )
             else:
                 n_eval = _evaluate_into(field_, grid, vol, mask, x0, chunk, fill)
