@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable
 
 import torch
-from hybridneus.grids import HashGrid
+from hybridneus.grids import DenseGrid, HashGrid
 from hybridneus.grids.levels import PRIMES
 
 MODES = ("fwd", "fwd+bwd", "eikonal")
@@ -92,6 +92,35 @@ def run_mode(model: torch.nn.Module, x: torch.Tensor, mode: str) -> None:
     sdf = model(xr) @ head
     (grad_x,) = torch.autograd.grad(sdf.sum(), xr, create_graph=True)
     (sdf.sum() + ((grad_x.norm(dim=-1) - 1.0) ** 2).sum()).backward()
+
+
+def bench_dense(args: argparse.Namespace) -> None:
+    """DenseGrid() against a HashGrid with the same 8 levels (16 -> 128, T = 2^19)."""
+    device = torch.device(args.device)
+    n = 2 ** (args.log2_n or [16])[0]
+    x = torch.rand(n, 3, device=device)
+    models = {
+        "DenseGrid()": DenseGrid().to(device),
+        "HashGrid(8, 2, 19, 16, 128)": HashGrid(8, 2, 19, 16, 128).to(device),
+    }
+    print(f"| grid (N = {n}) | " + " | ".join(args.modes) + " |")
+    print("|---|" + "---|" * len(args.modes))
+    rows = {name: [] for name in models}
+    for mode in args.modes:
+        times: dict[str, list[float]] = {k: [] for k in models}
+        for rep in range(args.repeats + 1):
+            for name, model in models.items():
+                sync(device)
+                t0 = time.perf_counter()
+                run_mode(model, x, mode)
+                sync(device)
+                if rep:
+                    times[name].append(time.perf_counter() - t0)
+                model.zero_grad(set_to_none=True)
+        for name in models:
+            rows[name].append(f"{n / statistics.median(times[name]) / 1e6:.3g}")
+    for name, cells in rows.items():
+        print(f"| {name} | " + " | ".join(cells) + " |")
 
 
 def sync(device: torch.device) -> None:
@@ -164,9 +193,14 @@ def main() -> None:
                     help="skip the slow flat version above this batch size")
     ap.add_argument("--threads", type=int, help="torch.set_num_threads")
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--dense", action="store_true",
+                    help="compare DenseGrid() with a HashGrid of the same levels instead")
     args = ap.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
+    if args.dense:
+        bench_dense(args)
+        return
     if args.full:
         ts, ns = args.log2_t or list(range(15, 20)), args.log2_n or list(range(14, 19))
     else:

@@ -255,7 +255,8 @@ class DenseGrid(_MultiresGrid):
 
     Same scale, offset, init and output layout as :class:`HashGrid`; level l stores
     ``side**3`` rows with ``side = floor(scale + 0.5) + 2``, so memory grows with the cube
-    of ``finest_resolution`` (~17 MB of float32 for the defaults). For small volumes.
+    of ``finest_resolution`` (3.7 M rows, 29 MB of float32 for the defaults). For small
+    volumes.
 
     Args:
         n_levels: number of levels L. Default: 8.
