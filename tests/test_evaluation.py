@@ -140,3 +140,15 @@ def test_log_colour_correction_undoes_a_per_channel_gain_and_gamma():
     assert raw < 25 and fixed.psnr > 38 and fixed.ssim > 0.99
     # gt = pred ** (1 / gamma) / gain ** (1 / gamma): slope 1 / gamma in log space
     assert np.allclose(fixed.gain, 1 / gamma, atol=0.02)
+
+
+def test_metrics_accept_mesh_files(tmp_path):
+    gt, pred = sphere(0.5, 3), sphere(0.55, 3)
+    gt.export(tmp_path / "gt.ply")
+    pred.export(tmp_path / "pred.obj")
+    from_files = chamfer_distance(tmp_path / "pred.obj", str(tmp_path / "gt.ply"), 2000)
+    in_memory = chamfer_distance(pred, gt, 2000)
+    # same samples; only the files' float32 vertices differ in the last digits
+    assert from_files.chamfer == pytest.approx(in_memory.chamfer, rel=1e-5)
+    assert from_files.fscore == in_memory.fscore
+    assert sdf_mae(tmp_path / "pred.obj", gt, 1000).mae == pytest.approx(0.05, abs=0.003)

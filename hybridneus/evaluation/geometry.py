@@ -19,6 +19,7 @@ with signed distances from :func:`hybridneus.evaluation.inside.signed_distance`.
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -58,6 +59,18 @@ class SdfMaeResult:
         return asdict(self)
 
 
+MeshLike = trimesh.Trimesh | str | os.PathLike
+
+
+def as_mesh(mesh: MeshLike) -> trimesh.Trimesh:
+    """A trimesh as is, or the mesh file at a path (MeshError if unreadable)."""
+    if isinstance(mesh, trimesh.Trimesh):
+        return mesh
+    from hybridneus.meshing.convert import load_mesh
+
+    return load_mesh(mesh)
+
+
 def unit_cube_transform(gt: trimesh.Trimesh) -> tuple[np.ndarray, float]:
     """(centre (3,), scale) with x' = (x - centre) * scale + 0.5 mapping gt's box into [0, 1]^3."""
     lo, hi = np.asarray(gt.bounds, dtype=np.float64)
@@ -93,8 +106,8 @@ def sample_surface(mesh: trimesh.Trimesh, n: int, seed) -> np.ndarray:
 
 
 def chamfer_distance(
-    pred: trimesh.Trimesh,
-    gt: trimesh.Trimesh,
+    pred: MeshLike,
+    gt: MeshLike,
     n_samples: int = 10_000,
     seed: int = 0,
     threshold: float = 0.01,
@@ -103,7 +116,7 @@ def chamfer_distance(
     """Paper-protocol Chamfer distance of ``pred`` against ``gt`` (see module docstring).
 
     Args:
-        pred: predicted mesh.
+        pred: predicted mesh (a trimesh or a mesh file path).
         gt: ground-truth mesh (defines the normalisation).
         n_samples: surface samples per mesh.
         seed: sampling seed; the same seed gives the same numbers.
@@ -112,6 +125,7 @@ def chamfer_distance(
     """
     from scipy.spatial import cKDTree
 
+    pred, gt = as_mesh(pred), as_mesh(gt)
     if normalize:
         pred, gt = normalize_pair(pred, gt)
     s_pred, s_gt = _seeds(seed, 2)
@@ -159,8 +173,8 @@ def sdf_mae_points(
 
 
 def sdf_mae(
-    pred: trimesh.Trimesh,
-    gt: trimesh.Trimesh,
+    pred: MeshLike,
+    gt: MeshLike,
     n_points: int = 10_000,
     seed: int = 0,
     normalize: bool = True,
@@ -169,13 +183,14 @@ def sdf_mae(
     """Mean |SDF_gt - SDF_pred| over the paper's hybrid sample (see module docstring).
 
     Args:
-        pred: predicted mesh.
+        pred: predicted mesh (a trimesh or a mesh file path).
         gt: ground-truth mesh.
         n_points: sample size (half near the surfaces, half uniform).
         seed: sampling seed.
         normalize: map both meshes into gt's unit cube first (False: world units).
         sign_method: ``auto``, ``winding`` or ``rays`` (:mod:`hybridneus.evaluation.inside`).
     """
+    pred, gt = as_mesh(pred), as_mesh(gt)
     if normalize:
         pred, gt = normalize_pair(pred, gt)
     points, is_near = sdf_mae_points(pred, gt, n_points, seed)
