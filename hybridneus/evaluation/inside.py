@@ -73,7 +73,7 @@ def winding_number(
     points: np.ndarray,
     cluster_size: int = 32,
     beta: float = 3.0,
-    pair_budget: int = 2**21,
+    pair_budget: int = 2**20,
 ) -> np.ndarray:
     """Generalised winding number (n_points,) float64 of ``points`` (n_points, 3), fast.
 
@@ -89,7 +89,8 @@ def winding_number(
         points: query points.
         cluster_size: faces per cluster.
         beta: far-field threshold in cluster radii.
-        pair_budget: point-cluster or point-triangle pairs per chunk (bounds memory).
+        pair_budget: point-cluster or point-triangle pairs per chunk (bounds memory: the
+            near-field chunk holds pair_budget triangles, ~250 bytes each).
     """
     tris_np = np.asarray(mesh.triangles, dtype=np.float64)
     pts_all = torch.tensor(np.asarray(points), dtype=torch.float64)
