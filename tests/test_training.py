@@ -65,6 +65,16 @@ def test_event_loss_matches_the_format_definition():
     assert float(L.event_loss(c0, c1, target, bayer, eps)) == pytest.approx(expected, rel=1e-5)
 
 
+def test_outside_loss_only_sees_negative_sdf_outside_the_crop():
+    sdf = torch.tensor([-0.2, 0.3, -0.1, -0.5], requires_grad=True)
+    outside = torch.tensor([True, True, False, False])
+    loss = L.outside_loss(sdf, outside)
+    assert float(loss) == pytest.approx(0.1)
+    loss.backward()
+    assert sdf.grad.tolist() == pytest.approx([-0.5, 0.0, 0.0, 0.0])
+    assert float(L.outside_loss(sdf, torch.zeros(4, dtype=torch.bool))) == 0.0
+
+
 def test_training_steps_lower_the_event_loss(scene):
     """Optimising on one fixed batch must drive its event loss down (gradients are right)."""
     from hybridneus.rendering.renderer import render_rays

@@ -101,6 +101,28 @@ def curvature_loss(grad_a: torch.Tensor, grad_b: torch.Tensor) -> torch.Tensor:
     return ((na - nb) ** 2).sum(dim=-1).mean()
 
 
+def outside_loss(sdf: torch.Tensor, outside: torch.Tensor) -> torch.Tensor:
+    """Mean of ``relu(-sdf)`` over points outside the crop cylinder (0 when there are none).
+
+    Nothing outside the crop is rendered, so no event constrains the field there; negative
+    values left over from initialisation would cap meshes at the crop boundary. This soft
+    penalty pushes them positive without clamping the SDF (a hard clamp collapses training).
+
+    Args:
+        sdf: SDF at random points, (n_points,).
+        outside: (n_points,) bool, True outside the crop.
+
+    Returns:
+        loss: scalar.
+
+    Note:
+        Differentiable in ``sdf``.
+    """
+    if not bool(outside.any()):
+        return sdf.sum() * 0.0
+    return torch.relu(-sdf[outside]).mean()
+
+
 def sparsity_loss(sdf: torch.Tensor, tau: float) -> torch.Tensor:
     """Mean of ``exp(-tau |sdf|)`` at random volume points (discourages stray surfaces).
 

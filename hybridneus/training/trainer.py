@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from hybridneus.config import Config
-from hybridneus.model.field import HybridField, crop_aabb
+from hybridneus.model.field import HybridField, crop_aabb, crop_sdf
 from hybridneus.rendering.occupancy import OccupancyGrid
 from hybridneus.rendering.renderer import render_rays
 from hybridneus.rendering.sampling import NeuSSampler
@@ -180,8 +180,12 @@ class Trainer:
         return factor
 
     def _random_points(self, n: int) -> torch.Tensor:
+        """Uniform points in the crop box grown by ``loss.random_box_margin``, within [-1, 1]^3."""
+        lo, hi = self.aabb[:3], self.aabb[3:]
+        pad = (hi - lo) * self.cfg.loss.random_box_margin
+        lo, hi = (lo - pad).clamp(-1.0, 1.0), (hi + pad).clamp(-1.0, 1.0)
         u = torch.rand((n, 3), generator=self.generator, device=self.device)
-        return self.aabb[:3] + u * (self.aabb[3:] - self.aabb[:3])
+        return lo + u * (hi - lo)
 
     def train_step(self) -> dict[str, float]:
         """Run one optimisation step; return the logged scalars."""
@@ -205,7 +209,10 @@ class Trainer:
         terms: dict[str, torch.Tensor] = {}
         terms["event"] = L.event_loss(c0, c1, batch.target, batch.bayer, self.scene["tonemap_eps"])
         need_random = lw.n_random_points > 0 and (
-            lw.lambda_eikonal > 0 or lw.lambda_curvature > 0 or lw.lambda_sparsity > 0
+            lw.lambda_eikonal > 0
+            or lw.lambda_curvature > 0
+            or lw.lambda_sparsity > 0
+            or lw.lambda_outside > 0
         )
         grads = [out.gradients]
         if need_random:
@@ -217,8 +224,11 @@ class Trainer:
                 shifted = pts + lw.curvature_step * torch.nn.functional.normalize(offset, dim=-1)
                 _, grad_s, _ = self.field.sdf_gradient_features(shifted, create_graph=True)
                 terms["curvature"] = L.curvature_loss(grad_r, grad_s)
+            outside = crop_sdf(pts, self.field.crop) > 0
             if lw.lambda_sparsity > 0:
-                terms["sparsity"] = L.sparsity_loss(sdf_r, lw.sparsity_tau)
+                terms["sparsity"] = L.sparsity_loss(sdf_r[~outside], lw.sparsity_tau)
+            if lw.lambda_outside > 0:
+                terms["outside"] = L.outside_loss(sdf_r, outside)
         if lw.lambda_eikonal > 0:
             terms["eikonal"] = L.eikonal_loss(torch.cat(grads))
         total = sum(getattr(lw, f"lambda_{name}") * value for name, value in terms.items())
