@@ -36,7 +36,9 @@ class FlatHashGrid(torch.nn.Module):
         sizes = [lvl.table_size for lvl in grid.levels]
         self.table = torch.nn.Parameter(torch.cat([t.detach() for t in grid.tables]))
         self.register_buffer("offsets", torch.tensor([0, *sizes[:-1]]).cumsum(0))
-        self.register_buffer("scales", torch.tensor([lvl.scale for lvl in grid.levels]))
+        self.register_buffer(
+            "scales", torch.tensor([lvl.scale for lvl in grid.levels], dtype=torch.float64)
+        )
         self.register_buffer("sides", torch.tensor([lvl.side for lvl in grid.levels]))
         self.register_buffer("hashed", torch.tensor([lvl.hashed for lvl in grid.levels]))
         self.register_buffer("masks", torch.tensor(sizes) - 1)

@@ -65,7 +65,6 @@ class _MultiresGrid(nn.Module):
         dense_offsets = corner[:, 0] * sides[:, None] ** 2 + corner[:, 1] * sides[:, None]
         dense_offsets = dense_offsets + corner[:, 2]
         buffers = {
-            "scales": torch.tensor([lvl.scale for lvl in levels], dtype=torch.float64),
             "sides": sides,
             "masks": torch.tensor(sizes, dtype=torch.int64) - 1,
             "dense_offsets": dense_offsets,  # (n_levels, 8)
@@ -99,7 +98,11 @@ class _MultiresGrid(nn.Module):
             piecewise constant.
         """
         n_act, n = self.active_levels, xt.shape[1]
-        pos = xt.unsqueeze(0) * self._scales[:n_act].to(xt.dtype).view(n_act, 1, 1) + 0.5
+        # Built from Python floats each call so module.float()/.half() cannot round them.
+        scales = torch.tensor(
+            [lvl.scale for lvl in self.levels[:n_act]], dtype=xt.dtype, device=xt.device
+        )
+        pos = xt.unsqueeze(0) * scales.view(n_act, 1, 1) + 0.5
         cell = pos.detach().floor()
         frac = pos - cell  # (n_act, 3, n)
         dtype = self.index_dtype

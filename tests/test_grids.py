@@ -88,6 +88,15 @@ def test_hashgrid_matches_reference(cfg):
     torch.testing.assert_close(out, ref, rtol=1e-12, atol=1e-12)
 
 
+def test_default_hashgrid_matches_reference():
+    """Full default geometry (16 levels, T = 2^19, 16 -> 2048) on a few points."""
+    grid = HashGrid(dtype=torch.float64)
+    _random_tables(grid)
+    x = _points(5, seed=7)
+    ref = _reference_encode(x, list(grid.tables), 16, 16, 2048, 19)
+    torch.testing.assert_close(grid(x), ref, rtol=1e-12, atol=1e-12)
+
+
 def test_densegrid_matches_reference():
     grid = DenseGrid(3, 2, 3, 17, dtype=torch.float64)
     _random_tables(grid)
