@@ -94,7 +94,8 @@ def test_default_hashgrid_matches_reference():
     _random_tables(grid)
     x = _points(5, seed=7)
     ref = _reference_encode(x, list(grid.tables), 16, 16, 2048, 19)
-    torch.testing.assert_close(grid(x), ref, rtol=1e-12, atol=1e-12)
+    # The reference does not snap scale 2046.9999999999984 to 2047: ~1e-12 differences.
+    torch.testing.assert_close(grid(x), ref, rtol=1e-9, atol=1e-9)
 
 
 def test_densegrid_matches_reference():
