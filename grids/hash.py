@@ -49,6 +49,7 @@ class _MultiresGrid(nn.Module):
         if any(lvl.hashed for lvl in levels[: self.n_dense]):
             raise ConfigError(f"{owner}: dense levels must precede hashed levels")
         sizes = [lvl.table_size for lvl in levels]
+        self._sizes = sizes
         #: One (table_size, n_features_per_level) parameter per level.
         self.tables = nn.ParameterList(
             nn.Parameter(
@@ -105,7 +106,8 @@ class _MultiresGrid(nn.Module):
         pos = xt.unsqueeze(0) * scales.view(n_act, 1, 1) + 0.5
         cell = pos.detach().floor()
         frac = pos - cell  # (n_act, 3, n)
-        dtype = self.index_dtype
+        # int32 rows only while every row number fits (huge dense levels need int64).
+        dtype = self.index_dtype if max(self._sizes) < 2**31 else torch.int64
         ic = cell.to(dtype)
         n_dense = min(self.n_dense, n_act)
         idx = torch.empty(n_act, 8, n, dtype=dtype, device=xt.device)
