@@ -112,7 +112,7 @@ def main() -> None:
         field = fit(data, preset_config(args.preset), overrides=overrides, out=args.out,
                     device=args.device, progress=False)
         report.update(fit_s=round(time.perf_counter() - t, 1), steps=field.trainer_step,
-                      run=str(field.run_dir), inv_s=round(float(field.inv_s()), 1))
+                      run=str(field.run_dir), inv_s=round(float(field.inv_s().detach()), 1))
         run_dir = field.run_dir
     else:
         run_dir = args.run

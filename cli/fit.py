@@ -57,8 +57,12 @@ def fit(
     Ctrl-C saves a checkpoint; continue with --resume RUN. `hybridneus mesh` then extracts
     the mesh of runs/latest.
     """
+    import os
     import sys
 
+    # Transparent huge pages for PyTorch's CPU allocator: large fresh buffers fault in much
+    # faster (measured in docs/anchors); must be set before torch is first imported.
+    os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")
     from hybridneus.api import fit as api_fit
     from hybridneus.config import load_config, preset_config
     from hybridneus.errors import ConfigError
