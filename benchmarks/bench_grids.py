@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable
 
 import torch
+
 from hybridneus.grids import DenseGrid, HashGrid
 from hybridneus.grids.levels import PRIMES
 

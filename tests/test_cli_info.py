@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from hybridneus.cli import app as cli_app  # noqa: E402
 from test_data_builder import H, W, random_events, write_split  # noqa: E402
+
+from hybridneus.cli import app as cli_app  # noqa: E402
 
 SIZE_ARGS = ["--preset-override", f"width={W}", "--preset-override", f"height={H}"]
 

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import math
 
-import hybridneus.grids as grids
 import pytest
 import torch
-from hybridneus.grids import DenseGrid, HashGrid
 from torch.autograd import gradcheck, gradgradcheck
 from torch.func import functional_call
 
+import hybridneus.grids as grids
 from hybridneus.errors import ConfigError
+from hybridneus.grids import DenseGrid, HashGrid
 
 P1, P2 = 2654435761, 805459861
 

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import math
 
-import hybridneus.grids as grids
 import numpy as np
 import pytest
 import torch
-from hybridneus.grids import FrequencyEncoding, LevelSchedule, SphericalHarmonics
 from scipy.special import sph_harm_y
 from torch.autograd import gradgradcheck
 
+import hybridneus.grids as grids
 from hybridneus.errors import ConfigError
+from hybridneus.grids import FrequencyEncoding, LevelSchedule, SphericalHarmonics
 
 
 def test_every_public_name_resolves():
