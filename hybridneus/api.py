@@ -38,6 +38,9 @@ def load_training_data(cfg: Config, dataset: Any = None):
 
     if isinstance(dataset, EventDataset):
         if cfg.data.overrides():
+            import copy
+
+            dataset = copy.copy(dataset)  # never change the caller's preset
             dataset.preset = preset_overrides(dataset.preset, cfg.data.overrides())
         if not cfg.data.path:
             cfg.data.path = str(dataset.root)

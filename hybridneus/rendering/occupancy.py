@@ -1,8 +1,9 @@
 """An occupancy grid over the sampling box, refreshed from the SDF, for empty-space skipping.
 
 A cell is occupied when the surface may pass through it: ``|sdf(centre)|`` is below half the
-cell diagonal plus a band of ``band / inv_s`` (the width where NeuS's density is non-zero),
-dilated by one cell. Samples are then placed only in occupied cells.
+cell diagonal plus a band of ``band / inv_s`` (the width where NeuS's density is non-zero), or
+the SDF changes sign among its 26 neighbours; the result is dilated by one cell. Samples
+are then placed only in occupied cells.
 """
 
 from __future__ import annotations
@@ -65,8 +66,14 @@ class OccupancyGrid(torch.nn.Module):
         sdf = torch.cat([sdf_fn(p) for p in centres.split(chunk)])
         cell = (self.aabb[3:] - self.aabb[:3]) / self.resolution
         threshold = 0.5 * float(cell.norm()) + band / max(float(inv_s), 1e-3)
-        occ = (sdf.abs() <= threshold).reshape((self.resolution,) * 3).float()
-        occ = F.max_pool3d(occ[None, None], kernel_size=3, stride=1, padding=1)[0, 0] > 0
+        grid = sdf.reshape((1, 1) + (self.resolution,) * 3)
+        near = grid.abs() <= threshold
+        # A sign change among neighbours also marks the surface: with |grad sdf| > 1 (early
+        # training) the band test alone can miss it, and a lost surface stops all learning.
+        hi = F.max_pool3d(grid, kernel_size=3, stride=1, padding=1)
+        lo = -F.max_pool3d(-grid, kernel_size=3, stride=1, padding=1)
+        occ = (near | ((hi >= 0) & (lo <= 0))).float()
+        occ = F.max_pool3d(occ, kernel_size=3, stride=1, padding=1)[0, 0] > 0
         # A grid that lost the surface entirely would stop all learning: keep everything.
         if not bool(occ.any()):
             occ = torch.ones_like(occ)
