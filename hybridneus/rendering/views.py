@@ -40,7 +40,7 @@ def inference_sampler(
     n_coarse: int = 32,
     n_importance: int = 32,
     up_rounds: int = 2,
-    occupancy_resolution: int = 96,
+    occupancy_resolution: int = 64,
 ) -> NeuSSampler:
     """A :class:`NeuSSampler` for rendering ``field``, its occupancy grid fitted to the field.
 
