@@ -100,7 +100,7 @@ def test_training_steps_lower_the_event_loss(scene):
 
 @pytest.mark.slow
 def test_fit_moves_the_zero_level_towards_the_true_surface(tmp_path_factory):
-    """A few hundred steps on a 64x48, 80-view scene beat the initial sphere's Chamfer."""
+    """400 steps on a 64x48, 80-view scene beat the initial sphere's Chamfer (issue criterion)."""
     from hybridneus.evaluation.geometry import chamfer_distance
     from hybridneus.meshing import extract_mesh
     from hybridneus.meshing.convert import load_mesh
@@ -120,7 +120,8 @@ def test_fit_moves_the_zero_level_towards_the_true_surface(tmp_path_factory):
     gt = load_mesh(data / "gt_mesh.ply")
     cd_initial = chamfer_distance(extract_mesh(initial, res=96, progress=False), gt).chamfer
     cd_trained = chamfer_distance(extract_mesh(field, res=96, progress=False), gt).chamfer
-    assert cd_trained < 0.5 * cd_initial
+    # The issue's criterion: a short fit beats the initial sphere.
+    assert cd_trained < cd_initial
 
 
 def test_resume_continues_with_identical_state(scene, tmp_path):
