@@ -3,6 +3,7 @@
     python benchmarks/bench_mesh.py                 # res 300 and 512, both fields
     python benchmarks/bench_mesh.py --quick         # res 128 only, one repeat
     python benchmarks/bench_mesh.py --res 300 512 1024 --fields analytic
+    python benchmarks/bench_mesh.py --run runs/bunny-...   # a trained run (the real target)
 
 The HybridField stands in for a trained one: same architecture and cost per query (the
 "fast" preset); its geometric initialisation is a sphere of radius 0.9 x crop radius, cut
@@ -20,11 +21,16 @@ import time
 import torch
 
 
-def make_field(kind: str):
-    """(field, crop or None) for ``analytic`` or ``hybrid``."""
+def make_field(kind: str, run: str | None = None):
+    """(field, crop or None) for ``analytic``, ``hybrid`` (untrained) or ``trained`` (``run``)."""
     from hybridneus.meshing import CropVolume
     from hybridneus.model.analytic import TorusField
 
+    if kind == "trained":
+        from hybridneus.training.runs import load_field
+
+        field = load_field(run, device="cpu")
+        return field, CropVolume(*(float(v) for v in field.crop))
     if kind == "analytic":
         return TorusField(0.5, 0.2), None
     from hybridneus.config import preset_config
@@ -66,11 +72,14 @@ def query_cost(field, n: int = 2**16) -> tuple[float, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--res", type=int, nargs="+", default=[300, 512])
-    parser.add_argument("--fields", nargs="+", default=["analytic", "hybrid"])
+    parser.add_argument("--fields", nargs="*", default=["analytic", "hybrid"])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     parser.add_argument("--quick", action="store_true", help="res 128, one repeat")
+    parser.add_argument("--run", help="a trained run folder: time its field (adds 'trained')")
     args = parser.parse_args()
+    if args.run:
+        args.fields = [*args.fields, "trained"] if "trained" not in args.fields else args.fields
     if args.quick:
         args.res, args.repeats = [128], 1
     torch.set_num_threads(args.threads)
@@ -79,7 +88,7 @@ def main() -> None:
     print(" coarse | fine | MC | post | colour |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for kind in args.fields:
-        field, crop = make_field(kind)
+        field, crop = make_field(kind, args.run)
         time_once(field, crop, 64, True)  # warm-up (imports, allocator, thread pool)
         sdf_us, color_us = query_cost(field)
         print(f"<!-- {kind}: sdf {sdf_us:.2f} us/point, color {color_us:.2f} us/point -->")
