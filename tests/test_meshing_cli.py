@@ -9,40 +9,10 @@ import pytest
 
 from hybridneus.meshing import load_mesh
 
-TINY = [
-    "grid.n_levels=4",
-    "grid.log2_table_size=12",
-    "grid.base_resolution=8",
-    "grid.max_resolution=32",
-    "grid.start_levels=2",
-    "render.n_coarse=8",
-    "render.n_importance=4",
-    "render.occupancy_resolution=16",
-    "render.occupancy_every=8",
-    "render.occupancy_march=24",
-    "loss.n_random_points=64",
-    "train.n_rays=32",
-    "train.warmup=1",
-    "train.log_every=1",
-    "train.preview_every=0",
-    "train.checkpoint_every=0",
-    "train.iters=1",
-]
-
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    from hybridneus.api import fit
-    from hybridneus.config import apply_overrides, preset_config
-    from hybridneus.simulate import SimulationConfig, simulate_dataset
-
-    root = tmp_path_factory.mktemp("mesh_cli")
-    cfg = SimulationConfig(n_views=8, width=24, height=18, val_views=0, test_views=0,
-                           revolutions=1.0, supersample=1)
-    simulate_dataset("builtin:device", root / "device", cfg)
-    fit(root / "device", apply_overrides(preset_config("fast"), TINY), out=root / "runs",
-        device="cpu")
-    return root / "runs"
+def runs(tiny_scene):
+    return tiny_scene / "runs"
 
 
 @pytest.fixture()

@@ -1,0 +1,48 @@
+"""Shared fixtures: a tiny simulated scene with a (barely) trained run, for CLI tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+# A one-step fit of a minimal model: enough to make a real run folder (config, checkpoint,
+# latest pointer) in a second, not to learn anything.
+TINY_FIT = [
+    "grid.n_levels=4",
+    "grid.log2_table_size=12",
+    "grid.base_resolution=8",
+    "grid.max_resolution=32",
+    "grid.start_levels=2",
+    "render.n_coarse=8",
+    "render.n_importance=4",
+    "render.occupancy_resolution=16",
+    "render.occupancy_every=8",
+    "render.occupancy_march=24",
+    "loss.n_random_points=64",
+    "train.n_rays=32",
+    "train.warmup=1",
+    "train.log_every=1",
+    "train.preview_every=0",
+    "train.checkpoint_every=0",
+    "train.iters=1",
+]
+TINY_SIZE = (24, 18)  # width, height
+
+
+@pytest.fixture(scope="session")
+def tiny_scene(tmp_path_factory) -> Path:
+    """A folder holding ``device/`` (8 training + 3 test views at 24x18, simulated from the
+    built-in scene) and ``runs/`` with one fitted run."""
+    from hybridneus.api import fit
+    from hybridneus.config import apply_overrides, preset_config
+    from hybridneus.simulate import SimulationConfig, simulate_dataset
+
+    root = tmp_path_factory.mktemp("tiny_scene")
+    width, height = TINY_SIZE
+    cfg = SimulationConfig(n_views=8, width=width, height=height, val_views=0, test_views=3,
+                           revolutions=1.0, supersample=1)
+    simulate_dataset("builtin:device", root / "device", cfg)
+    fit(root / "device", apply_overrides(preset_config("fast"), TINY_FIT), out=root / "runs",
+        device="cpu")
+    return root
