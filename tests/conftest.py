@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -46,3 +48,24 @@ def tiny_scene(tmp_path_factory) -> Path:
     fit(root / "device", apply_overrides(preset_config("fast"), TINY_FIT), out=root / "runs",
         device="cpu")
     return root
+
+
+@pytest.fixture()
+def run_cli(capsys, monkeypatch) -> Callable[..., tuple[int, str, str]]:
+    """Run ``hybridneus <args>`` in this process through ``main()`` (which maps errors to exit
+    codes): returns (exit code, stdout, stderr)."""
+    from hybridneus.cli.app import main
+
+    def run(*args: str) -> tuple[int, str, str]:
+        monkeypatch.setattr(sys, "argv", ["hybridneus", *args])
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as exc:
+            # sys.exit(None) is success; a message instead of a code means failure.
+            code = 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return run

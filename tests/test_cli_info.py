@@ -13,21 +13,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_data_builder import H, W, random_events, write_split  # noqa: E402
 
-from hybridneus.cli import app as cli_app  # noqa: E402
-
 SIZE_ARGS = ["--preset-override", f"width={W}", "--preset-override", f"height={H}"]
-
-
-def _run(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
-    """Run the console entry point in-process; return (exit code, stdout, stderr)."""
-    monkeypatch.setattr(sys, "argv", ["hybridneus", *args])
-    code = 0
-    try:
-        cli_app.main()
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else 1
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.fixture
@@ -40,8 +26,8 @@ def scene(tmp_path) -> Path:
     return root
 
 
-def test_info_table(monkeypatch, capsys, scene):
-    code, out, err = _run(monkeypatch, capsys, "info", str(scene), *SIZE_ARGS)
+def test_info_table(run_cli, scene):
+    code, out, err = run_cli("info", str(scene), *SIZE_ARGS)
     assert code == 0, err
     assert "train" in out and "test" in out
     assert "400" in out and "absent" in out
@@ -51,41 +37,41 @@ def test_info_table(monkeypatch, capsys, scene):
     assert "0/1 (converted to -1/+1)" in out
 
 
-def test_info_override_and_split(monkeypatch, capsys, scene):
-    code, out, _ = _run(monkeypatch, capsys, "info", str(scene), *SIZE_ARGS,
+def test_info_override_and_split(run_cli, scene):
+    code, out, _ = run_cli("info", str(scene), *SIZE_ARGS,
                         "-o", "threshold=0.2", "--split", "test")
     assert code == 0
     assert "threshold=0.2" in out and "│ train" not in out
 
 
-def test_info_fallback_is_reported(monkeypatch, capsys, tmp_path):
+def test_info_fallback_is_reported(run_cli, tmp_path):
     root = tmp_path / "captures" / "thing"
     write_split(root / "train", n_views=3)
-    code, out, _ = _run(monkeypatch, capsys, "info", str(root), *SIZE_ARGS)
+    code, out, _ = run_cli("info", str(root), *SIZE_ARGS)
     assert code == 0
     assert "custom" in out and "fallback" in out
 
 
-def test_info_broken_dataset_exit_2(monkeypatch, capsys, scene):
+def test_info_broken_dataset_exit_2(run_cli, scene):
     bad = scene / "train" / "pose" / "r_00001.txt"
     bad.write_text("1 2 3")
-    code, out, err = _run(monkeypatch, capsys, "info", str(scene), *SIZE_ARGS)
+    code, out, err = run_cli("info", str(scene), *SIZE_ARGS)
     assert code == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and str(bad) in lines[0]
 
 
-def test_info_bad_override_exit_2(monkeypatch, capsys, scene):
-    code, _, err = _run(monkeypatch, capsys, "info", str(scene), "-o", "thresh=1")
+def test_info_bad_override_exit_2(run_cli, scene):
+    code, _, err = run_cli("info", str(scene), "-o", "thresh=1")
     assert code == 2 and err.strip().startswith("error: thresh: unknown preset key")
 
 
-def test_preview_writes_pngs(monkeypatch, capsys, scene, tmp_path):
+def test_preview_writes_pngs(run_cli, scene, tmp_path):
     # A readable rgb frame for view 0; the rest stay unreadable placeholders.
     rgb0 = np.full((H * 2, W * 2, 3), 90, np.uint8)
     cv2.imwrite(str(scene / "train" / "rgb" / "r_00000.png"), rgb0)
     out_dir = tmp_path / "prev"
-    code, out, err = _run(monkeypatch, capsys, "preview", str(scene), "--out", str(out_dir),
+    code, out, err = run_cli("preview", str(scene), "--out", str(out_dir),
                           "--n", "3", "--window", "2", *SIZE_ARGS)
     assert code == 0, err
     files = sorted(out_dir.glob("*.png"))
@@ -101,9 +87,9 @@ def test_preview_writes_pngs(monkeypatch, capsys, scene, tmp_path):
     assert not list(out_dir.glob(".*"))  # no temporary files left
 
 
-def test_preview_broken_dataset_exit_2(monkeypatch, capsys, scene, tmp_path):
+def test_preview_broken_dataset_exit_2(run_cli, scene, tmp_path):
     (scene / "train" / "events" / "events.npz").unlink()
-    code, _, err = _run(monkeypatch, capsys, "preview", str(scene), "--out",
+    code, _, err = run_cli("preview", str(scene), "--out",
                         str(tmp_path / "p"), *SIZE_ARGS)
     assert code == 2
     assert err.startswith("error: ") and "exactly one .npz" in err

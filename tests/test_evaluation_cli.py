@@ -18,22 +18,9 @@ def _subprocess(*args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture()
-def cli(capsys, monkeypatch):
-    """Run ``hybridneus eval ...`` in this process through main(): (exit code, stdout, stderr)."""
-    from hybridneus.cli.app import main
-
-    def run(*args: str):
-        monkeypatch.setattr(sys, "argv", ["hybridneus", "eval", *args])
-        capsys.readouterr()
-        try:
-            main()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return run
+def cli(run_cli):
+    """``hybridneus eval ...`` in this process: (exit code, stdout, stderr)."""
+    return lambda *args: run_cli("eval", *args)
 
 
 def test_eval_prints_json_and_a_table(tmp_path, cli):

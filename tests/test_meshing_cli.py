@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 import pytest
 
@@ -16,19 +14,12 @@ def runs(tiny_scene):
 
 
 @pytest.fixture()
-def cli(capsys, monkeypatch):
-    """Run ``hybridneus mesh ...`` in this process through main(): (exit code, stderr)."""
-    from hybridneus.cli.app import main
+def cli(run_cli):
+    """``hybridneus mesh ...`` in this process: (exit code, stderr)."""
 
     def run(*args: str):
-        monkeypatch.setattr(sys, "argv", ["hybridneus", "mesh", *args])
-        capsys.readouterr()
-        try:
-            main()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code
-        return code, capsys.readouterr().err
+        code, _, err = run_cli("mesh", *args)
+        return code, err
 
     return run
 

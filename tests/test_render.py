@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 
 import cv2
 import numpy as np
@@ -18,23 +17,10 @@ def scene(tiny_scene):
     return tiny_scene
 
 
-def _main(monkeypatch, capsys, *args: str) -> tuple[int, str]:
-    from hybridneus.cli.app import main
-
-    monkeypatch.setattr(sys, "argv", ["hybridneus", "render", *args])
-    capsys.readouterr()
-    try:
-        main()
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    return code, capsys.readouterr().err
-
-
-def test_render_all_writes_views_metrics_orbit_and_event_sheet(scene, monkeypatch, capsys):
+def test_render_all_writes_views_metrics_orbit_and_event_sheet(scene, run_cli):
     out = scene / "pictures"
-    code, err = _main(monkeypatch, capsys, "--runs-root", str(scene / "runs"), "--views", "all",
-                      "--frames", "3", "--size", "32", "--windows", "2", "--out", str(out))
+    code, _, err = run_cli("render", "--runs-root", str(scene / "runs"), "--views", "all",
+                           "--frames", "3", "--size", "32", "--windows", "2", "--out", str(out))
     assert code == 0, err
     for i in (0, 1, 2):
         for kind in ("color", "normal", "depth"):
@@ -51,8 +37,8 @@ def test_render_all_writes_views_metrics_orbit_and_event_sheet(scene, monkeypatc
     assert not list(out.glob("*.tmp*")), "temporary files left behind"
 
 
-def test_render_bad_views_option_exits_2(scene, monkeypatch, capsys):
-    code, err = _main(monkeypatch, capsys, "--runs-root", str(scene / "runs"), "--views", "side")
+def test_render_bad_views_option_exits_2(scene, run_cli):
+    code, _, err = run_cli("render", "--runs-root", str(scene / "runs"), "--views", "side")
     assert code == 2
     assert err.strip().startswith("error: --views side")
     assert len(err.strip().splitlines()) == 1
