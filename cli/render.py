@@ -129,7 +129,7 @@ def _render_event_sheet(field, dataset, split_name: str, out: Path, windows: int
     import numpy as np
 
     from hybridneus.rendering.views import inference_sampler, predicted_event_frame
-    from hybridneus.training.previews import _diverging
+    from hybridneus.training.previews import diverging_bgr
 
     split = dataset.splits[split_name]
     preset = dataset.preset
@@ -141,8 +141,8 @@ def _render_event_sheet(field, dataset, split_name: str, out: Path, windows: int
     for t1 in ends:
         pred, rec = predicted_event_frame(field, split, preset, t1 - length, t1, sampler, stride)
         scale = float(np.percentile(np.abs(rec), 99)) or 1.0
-        # _diverging returns BGR; the sheet is written through an RGB->BGR conversion.
-        pair = [_diverging(rec, scale)[..., ::-1], _diverging(pred, scale)[..., ::-1]]
+        # diverging_bgr returns BGR; the sheet is written through an RGB->BGR conversion.
+        pair = [diverging_bgr(rec, scale)[..., ::-1], diverging_bgr(pred, scale)[..., ::-1]]
         gap = np.full((pair[0].shape[0], 4, 3), 255, np.uint8)
         rows.append(np.concatenate([pair[0], gap, pair[1]], axis=1))
     sheet = np.concatenate(

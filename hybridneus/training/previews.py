@@ -17,7 +17,7 @@ from hybridneus.fileio import atomic_path
 _MAX_PREVIEW_WIDTH = 128
 
 
-def _diverging(frame: np.ndarray, scale: float) -> np.ndarray:
+def diverging_bgr(frame: np.ndarray, scale: float) -> np.ndarray:
     """Signed (h, w) -> BGR uint8: red positive, blue negative, white zero."""
     v = np.clip(frame / max(scale, 1e-6), -1.0, 1.0)
     out = np.ones((*frame.shape, 3), dtype=np.float32)
@@ -88,8 +88,8 @@ def write_preview(trainer, path: Path, view: int | None = None) -> None:
     rgb = (np.clip(p["rgb"], 0, 1)[..., ::-1] * 255).astype(np.uint8)
     normal = ((p["normal"] * 0.5 + 0.5).clip(0, 1)[..., ::-1] * 255).astype(np.uint8)
     tiles = [
-        _label(_diverging(p["pred_events"], scale), "render d log"),
-        _label(_diverging(p["events"], scale), "C*E"),
+        _label(diverging_bgr(p["pred_events"], scale), "render d log"),
+        _label(diverging_bgr(p["events"], scale), "C*E"),
         _label(rgb, "colour"),
         _label(normal, "normal"),
     ]
