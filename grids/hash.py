@@ -40,9 +40,8 @@ class _MultiresGrid(nn.Module):
         #: Row-index dtype: int32 halves the index traffic (measured faster on CPU, see
         #: docs/benchmarks/grids.md); int64 gives identical rows.
         self.index_dtype = torch.int32
-        #: Points per chunk, bounding the (n_levels, 8, chunk * F) temporaries; None picks
-        #: 2**14 (CPU, no autograd), 2**16 (CPU, autograd) or 2**20 (CUDA) as measured in
-        #: docs/benchmarks/grids.md.
+        #: Points per chunk, bounding the per-level (8, chunk * F) temporaries; None picks
+        #: 2**18 on CPU and 2**20 on CUDA, as measured in docs/benchmarks/grids.md.
         self.chunk_size: int | None = None
         # Coarse levels are dense and fine ones hashed (side grows with the level).
         self.n_dense = sum(not lvl.hashed for lvl in levels)
@@ -65,13 +64,8 @@ class _MultiresGrid(nn.Module):
         )
         dense_offsets = corner[:, 0] * sides[:, None] ** 2 + corner[:, 1] * sides[:, None]
         dense_offsets = dense_offsets + corner[:, 2]
-        buffers = {
-            "sides": sides,
-            "masks": torch.tensor(sizes, dtype=torch.int64) - 1,
-            "dense_offsets": dense_offsets,  # (n_levels, 8)
-        }
-        for name, value in buffers.items():
-            self.register_buffer("_" + name, value, persistent=False)
+        # (n_levels, 8) row offsets of the 8 corners in each dense level.
+        self.register_buffer("_dense_offsets", dense_offsets, persistent=False)
 
     def set_active_levels(self, n: int) -> None:
         """Use only the ``n`` coarsest levels; finer levels are skipped and output zeros.
@@ -98,54 +92,61 @@ class _MultiresGrid(nn.Module):
             ``frac`` is differentiable w.r.t. ``xt`` (d frac / d x = scale); ``idx`` is
             piecewise constant.
         """
-        n_act, n = self.active_levels, xt.shape[1]
-        # Built from Python floats each call so module.float()/.half() cannot round them.
-        scales = torch.tensor(
-            [lvl.scale for lvl in self.levels[:n_act]], dtype=xt.dtype, device=xt.device
-        )
-        pos = xt.unsqueeze(0) * scales.view(n_act, 1, 1) + 0.5
-        cell = pos.detach().floor()
-        frac = pos - cell  # (n_act, 3, n)
+        per_level = [self._level_corners(xt, lvl) for lvl in range(self.active_levels)]
+        return (torch.stack([i for i, _ in per_level]), torch.stack([f for _, f in per_level]))
+
+    def _index_dtype(self) -> torch.dtype:
         # int32 rows only while every row number fits (huge dense levels need int64).
-        dtype = self.index_dtype if max(self._sizes) < 2**31 else torch.int64
+        return self.index_dtype if max(self._sizes) < 2**31 else torch.int64
+
+    def _level_corners(self, xt: torch.Tensor, lvl: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """One level of :meth:`corners`: idx (8, n) and frac (3, n)."""
+        level, n = self.levels[lvl], xt.shape[1]
+        pos = xt * level.scale + 0.5
+        cell = pos.detach().floor()
+        frac = pos - cell
+        dtype = self._index_dtype()
         ic = cell.to(dtype)
-        n_dense = min(self.n_dense, n_act)
-        idx = torch.empty(n_act, 8, n, dtype=dtype, device=xt.device)
-        if n_dense:
-            sides = self._sides[:n_dense].to(dtype).view(n_dense, 1)
+        if not level.hashed:
+            side = level.side
             # Points outside [0, 1]^3 are clamped to the border cell so rows stay in range.
-            icd = torch.minimum(ic[:n_dense].clamp_min(0), (sides - 2).unsqueeze(-1))
-            base = icd[:, 0] + icd[:, 1] * sides + icd[:, 2] * (sides * sides)
-            offsets = self._dense_offsets[:n_dense].to(dtype).unsqueeze(-1)
-            torch.add(base.unsqueeze(1), offsets, out=idx[:n_dense])
-        n_hash = n_act - n_dense
-        if n_hash:
-            ich = ic[n_dense:]
-            masks = self._masks[n_dense:n_act].to(dtype).view(n_hash, 1, 1)
-            # Masking each axis term first is exact for XOR; int32 products wrap modulo
-            # 2**32 like tcnn's uint32 hash, so int32 and int64 give the same rows.
-            p1, p2 = (_wrap(p, dtype) for p in PRIMES[1:])
-            iy = ich[:, 1] * p1
-            iz = ich[:, 2] * p2
-            hx = torch.stack((ich[:, 0], ich[:, 0] + 1), dim=1) & masks
-            hy = torch.stack((iy, iy + p1), dim=1) & masks
-            hz = torch.stack((iz, iz + p2), dim=1) & masks
-            h = (hz.view(n_hash, 2, 1, n) ^ hy.view(n_hash, 1, 2, n)).view(n_hash, 4, 1, n)
-            torch.bitwise_xor(h, hx.view(n_hash, 1, 2, n), out=idx[n_dense:].view(n_hash, 4, 2, n))
-        return idx, frac
+            ic = ic.clamp_(0, side - 2)
+            base = ic[0] + ic[1] * side + ic[2] * (side * side)
+            offsets = self._dense_offsets[lvl].to(dtype).unsqueeze(-1)
+            return base.unsqueeze(0) + offsets, frac
+        mask = level.table_size - 1
+        # Masking each axis term first is exact for XOR; int32 products wrap modulo 2**32
+        # like tcnn's uint32 hash, so int32 and int64 give the same rows.
+        p1, p2 = (_wrap(p, dtype) for p in PRIMES[1:])
+        iy = ic[1] * p1
+        iz = ic[2] * p2
+        hx = torch.stack((ic[0], ic[0] + 1)) & mask
+        hy = torch.stack((iy, iy + p1)) & mask
+        hz = torch.stack((iz, iz + p2)) & mask
+        h = (hz.view(2, 1, n) ^ hy.view(1, 2, n)).view(4, 1, n)
+        return (h ^ hx.view(1, 2, n)).view(8, n), frac
 
     def _encode(self, xt: torch.Tensor) -> torch.Tensor:
-        """(3, n) -> (n, out_dim)."""
+        """(3, n) -> (n, out_dim), one level at a time.
+
+        Level by level keeps every temporary at <= 64 bytes per point (16 MB for 2**18
+        points): glibc then reuses freed heap blocks instead of mapping and page-faulting
+        fresh memory on every call, which cost more than the gathers themselves here
+        (docs/benchmarks/grids.md). Each level's table gradient is also scattered once per
+        call instead of once per chunk.
+        """
         n, n_feat, n_act = xt.shape[1], self.n_features_per_level, self.active_levels
-        idx, frac = self.corners(xt)
-        if n_feat > 1:
-            # Repeat per feature so every lerp runs on contiguous (n_act, n * F) memory.
-            frac = frac.unsqueeze(-1).expand(n_act, 3, n, n_feat).reshape(n_act, 3, n * n_feat)
-        corners = gather_levels([self.tables[i] for i in range(n_act)], idx)
-        feats = trilinear(corners, frac).view(n_act, n, n_feat).transpose(0, 1)
+        feats = []
+        for lvl in range(n_act):
+            idx, frac = self._level_corners(xt, lvl)
+            if n_feat > 1:
+                # Repeat per feature so every lerp runs on contiguous (n * F) memory.
+                frac = frac.unsqueeze(-1).expand(3, n, n_feat).reshape(3, n * n_feat)
+            corners = gather_levels([self.tables[lvl]], idx.unsqueeze(0))
+            feats.append(trilinear(corners, frac).view(n, n_feat))
         if n_act < self.n_levels:
-            feats = torch.cat((feats, feats.new_zeros(n, self.n_levels - n_act, n_feat)), dim=1)
-        return feats.reshape(n, self.out_dim)
+            feats.append(feats[0].new_zeros(n, (self.n_levels - n_act) * n_feat))
+        return torch.cat(feats, dim=1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Encode points.
@@ -176,12 +177,7 @@ class _MultiresGrid(nn.Module):
             return xt.new_zeros(*batch, self.out_dim)
         chunk = self.chunk_size
         if chunk is None:
-            if xt.is_cuda:
-                chunk = 2**20
-            elif torch.is_grad_enabled() and (xt.requires_grad or self.tables[0].requires_grad):
-                chunk = 2**16
-            else:
-                chunk = 2**14
+            chunk = 2**20 if xt.is_cuda else 2**18
         chunk = max(1, int(chunk))
         if n <= chunk:
             out = self._encode(xt)
