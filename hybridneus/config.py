@@ -91,6 +91,7 @@ class LossConfig:
     n_random_points: int = 1024  # random volume points per step for Eikonal/regularisers
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
     curvature_step: float = 0.01  # finite-difference step of the curvature term (world units)
+    lambda_rgb: float = 1.0  # squared colour error (only with train.supervision = rgb)
 
 
 @dataclass
@@ -113,6 +114,7 @@ class TrainConfig:
     preview_every: int = 500  # steps between preview PNGs (0: never)
     checkpoint_every: int = 500  # steps between checkpoints (and always at the end)
     window: str = "per_iteration"  # event-window sampling: per_iteration | per_load
+    supervision: str = "events"  # events, or rgb: the rgb/ frames (2 * n_rays pixels per step)
 
 
 @dataclass

@@ -198,3 +198,30 @@ def test_fit_runs_on_cuda(scene, tmp_path):
     loaded = load_field(field.run_dir, device="cpu")
     pts = np.random.default_rng(0).uniform(-0.3, 0.3, (20, 3)).astype(np.float32)
     assert np.allclose(loaded.sdf(pts), field.sdf(pts), atol=1e-4)
+
+
+def test_rgb_supervision_fits_the_frames(scene):
+    """train.supervision=rgb trains on the rgb/ frames: their colour error falls."""
+    cfg = tiny("train.iters=40", "train.seed=1", "train.supervision=rgb", "train.decay_start=1.0")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    assert trainer.frames is not None and trainer.frames.frames.shape[1:] == (36, 48, 3)
+    batch = trainer.frames.sample(128)
+    trainer.frames.sample = lambda n: batch
+    logs: list[dict[str, float]] = []
+    trainer.fit([lambda t, lg: logs.append(lg)], progress=False)
+    assert "loss/event" not in logs[0]
+    assert np.mean([lg["loss/rgb"] for lg in logs[-5:]]) < 0.5 * logs[0]["loss/rgb"]
+
+
+def test_rgb_supervision_errors(scene, tmp_path):
+    from hybridneus.errors import ConfigError, DatasetError
+
+    with pytest.raises(ConfigError, match="train.supervision"):
+        prepare(scene, tiny("train.supervision=frames"), device="cpu")
+    import shutil
+
+    copy = tmp_path / "device"
+    shutil.copytree(scene, copy)
+    shutil.rmtree(copy / "train" / "rgb")
+    with pytest.raises(DatasetError, match="no rgb/ frames"):
+        prepare(copy, tiny("train.supervision=rgb"), device="cpu")

@@ -68,6 +68,19 @@ def event_loss(
     return ((pred - target) ** 2).mean()
 
 
+def rgb_loss(color: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean squared colour error (RGB-frame supervision, the benchmarks' upper bound).
+
+    Args:
+        color: rendered colour, (n_rays, 3).
+        target: frame colour in [0, 1], (n_rays, 3).
+
+    Returns:
+        loss: scalar.
+    """
+    return ((color - target) ** 2).sum(dim=-1).mean()
+
+
 def eikonal_loss(gradients: torch.Tensor) -> torch.Tensor:
     """Mean of ``(|grad sdf| - 1)^2`` over points.
 

@@ -105,7 +105,8 @@ def write_curve(history: list[dict[str, float]], path: Path, size=(480, 240)) ->
     w, h = size
     img = np.full((h, w, 3), 255, np.uint8)
     pad = 30
-    keys = [("loss/total", (0, 0, 0)), ("loss/event", (200, 60, 0)), ("loss/eikonal", (0, 140, 0))]
+    keys = [("loss/total", (0, 0, 0)), ("loss/event", (200, 60, 0)), ("loss/eikonal", (0, 140, 0)),
+            ("loss/rgb", (0, 60, 200))]
     series = []
     for key, colour in keys:
         pts = [(r["step"], r[key]) for r in history if key in r and r[key] > 0]

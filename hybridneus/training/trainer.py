@@ -116,6 +116,20 @@ class Trainer:
             self.split, self.preset, seed=cfg.train.seed, window=cfg.train.window,
             device=self.device,
         )
+        self.frames = None
+        if cfg.train.supervision == "rgb":
+            from hybridneus.data.frames import FrameRaySampler
+
+            self.frames = FrameRaySampler(
+                self.split, self.preset.width, self.preset.height, seed=cfg.train.seed,
+                device=self.device,
+            )
+        elif cfg.train.supervision != "events":
+            from hybridneus.errors import ConfigError
+
+            raise ConfigError(
+                f"train.supervision: expected 'events' or 'rgb', got {cfg.train.supervision!r}"
+            )
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
         variance = [self.field.variance]
         others = [q for name, q in self.field.named_parameters() if name != "variance"]
@@ -150,6 +164,8 @@ class Trainer:
             "torch_rng": torch.get_rng_state(),
             "generator": self.generator.get_state(),
             "window_rng": _to_primitive(rng),
+            "frame_rng": None if self.frames is None
+            else _to_primitive(self.frames.rng.bit_generator.state),
             "scene": dict(self.scene),
             "config": self.cfg.to_dict(),
         }
@@ -162,6 +178,8 @@ class Trainer:
         torch.set_rng_state(state["torch_rng"])
         self.generator.set_state(state["generator"])
         self.windows.rng.bit_generator.state = state["window_rng"]
+        if self.frames is not None and state.get("frame_rng") is not None:
+            self.frames.rng.bit_generator.state = state["frame_rng"]
         self.step = int(state["step"])
         self.total_steps = int(state["total_steps"])
         self.elapsed = float(state.get("elapsed", 0.0))
@@ -197,17 +215,26 @@ class Trainer:
             self.occupied_fraction = self.occupancy.update(
                 self.field.raw_sdf, float(self.field.inv_s().detach()), r.occupancy_band, r.chunk
             )
-        batch = self.windows.sample(cfg.train.n_rays).to(self.device)
-        n = batch.target.shape[0]
-        origins = torch.cat([batch.origins0, batch.origins1])
-        dirs = torch.cat([batch.dirs0, batch.dirs1])
+        lw = cfg.loss
+        terms: dict[str, torch.Tensor] = {}
+        if self.frames is None:
+            batch = self.windows.sample(cfg.train.n_rays).to(self.device)
+            n = batch.target.shape[0]
+            origins = torch.cat([batch.origins0, batch.origins1])
+            dirs = torch.cat([batch.dirs0, batch.dirs1])
+        else:
+            frame_batch = self.frames.sample(2 * cfg.train.n_rays)
+            origins, dirs = frame_batch.origins, frame_batch.dirs
         out = render_rays(
             self.field, origins, dirs, self.sampler, self.generator, True, r.crop_softness
         )
-        c0, c1 = out.color[:n], out.color[n:]
-        lw = cfg.loss
-        terms: dict[str, torch.Tensor] = {}
-        terms["event"] = L.event_loss(c0, c1, batch.target, batch.bayer, self.scene["tonemap_eps"])
+        if self.frames is None:
+            c0, c1 = out.color[:n], out.color[n:]
+            terms["event"] = L.event_loss(
+                c0, c1, batch.target, batch.bayer, self.scene["tonemap_eps"]
+            )
+        else:
+            terms["rgb"] = L.rgb_loss(out.color, frame_batch.color)
         need_random = lw.n_random_points > 0 and (
             lw.lambda_eikonal > 0
             or lw.lambda_curvature > 0
@@ -301,8 +328,8 @@ class Trainer:
                         task,
                         completed=self.step,
                         total=self.total_steps,
-                        info=f"loss {logs['loss/total']:.4g} ev {logs['loss/event']:.4g} "
-                        f"inv_s {logs['inv_s']:.0f} lv {int(logs['levels'])}",
+                        info=f"loss {logs['loss/total']:.4g} inv_s {logs['inv_s']:.0f} "
+                        f"lv {int(logs['levels'])}",
                     )
                     if not math.isfinite(logs["loss/total"]):
                         from hybridneus.errors import RunError

@@ -1,0 +1,418 @@
+"""Accuracy versus time on the shared assets: presets side by side, one JSON line per fit.
+
+For every asset folder (default ``../shared/assets`` beside the repository) the suite
+simulates a full-size dataset once (cached), then for every preset spec fits it for the
+budget in a fresh subprocess (so peak memory is per fit), keeping snapshots of the field
+along the way. Each snapshot is meshed at ``--res`` and scored with the paper's Chamfer
+protocol, which gives the CD-versus-time curve; the final field also gets accuracy,
+completeness, F-score, SDF-MAE, mesh time and, where the dataset has a test split with
+frames, PSNR/SSIM after the log-space colour correction.
+
+Preset specs: ``fast``, ``quality``, ``eventneus`` (the paper's deep MLPs), and ``<preset>-rgb``
+(the same model trained on the rendered RGB frames instead of the events: the upper bound).
+
+    python benchmarks/run_suite.py                                  # all assets, 15 min each
+    python benchmarks/run_suite.py --scenes bunny --minutes 5 --presets fast fast-rgb
+    python benchmarks/run_suite.py --noise-sweep bunny --minutes 5  # sensor-noise sweep
+    python benchmarks/run_suite.py --report                         # tables + plots only
+
+Results are appended to ``benchmarks/results/suite.jsonl`` (earlier lines are kept, so
+progress stays visible); ``--report`` prints markdown tables of the latest line per
+(scene, preset, budget, noise) and writes the CD-versus-time plots to ``docs/benchmarks/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_ASSETS = REPO.parent / "shared" / "assets"
+DEFAULT_OUT = REPO / "benchmarks" / "results" / "suite.jsonl"
+DEFAULT_PLOTS = REPO / "docs" / "benchmarks"
+MESH_EXTS = ("obj", "off", "ply", "glb", "gltf", "stl")
+# Sensor-noise levels of --noise-sweep: (threshold_sigma in log units, background events per
+# pixel per frame interval).
+NOISE_LEVELS = ((0.0, 0.0), (0.03, 0.02), (0.06, 0.05), (0.1, 0.1))
+
+
+def preset_spec(spec: str) -> tuple[str, list[str]]:
+    """``fast`` -> ("fast", []); ``fast-rgb`` -> ("fast", ["train.supervision=rgb"])."""
+    if spec.endswith("-rgb"):
+        return spec.removesuffix("-rgb"), ["train.supervision=rgb"]
+    return spec, []
+
+
+def find_scenes(assets: Path) -> dict[str, Path]:
+    """Asset name -> its mesh file, for every sub-folder of ``assets`` holding one."""
+    scenes = {}
+    for folder in sorted(p for p in assets.iterdir() if p.is_dir()):
+        for ext in MESH_EXTS:
+            found = sorted(folder.glob(f"*.{ext}"))
+            if found:
+                scenes[folder.name] = found[0]
+                break
+    return scenes
+
+
+def dataset_for(scene: str, mesh: Path, args, noise: tuple[float, float]) -> Path:
+    """Simulate (once) and return the dataset folder of ``scene`` at the suite's size."""
+    from hybridneus.simulate import NoiseConfig, SimulationConfig, simulate_dataset
+
+    tag = f"{scene}-{args.views}v-{args.width}x{args.height}-t{args.test_views}"
+    if noise != (0.0, 0.0):
+        tag += f"-noise{noise[0]:g}-{noise[1]:g}"
+    folder = args.cache / tag
+    if not (folder / "scene.json").is_file():
+        print(f"[suite] simulating {folder}", file=sys.stderr, flush=True)
+        cfg = SimulationConfig(
+            n_views=args.views, width=args.width, height=args.height, revolutions=8.0,
+            val_views=0, test_views=args.test_views,
+            noise=NoiseConfig(threshold_sigma=noise[0], background_rate=noise[1]),
+        )
+        simulate_dataset(str(mesh), folder, cfg)
+    return folder
+
+
+# --------------------------------------------------------------------------- one fit (child)
+
+
+def _score_field(field, gt, res: int) -> dict:
+    from hybridneus.evaluation.geometry import chamfer_distance
+    from hybridneus.meshing import extract_mesh
+
+    t = time.perf_counter()
+    mesh = extract_mesh(field, res=res, progress=False)
+    mesh_s = time.perf_counter() - t
+    if len(mesh.faces) == 0:
+        return {"chamfer": None, "faces": 0, "mesh_s": round(mesh_s, 2)}, mesh
+    cd = chamfer_distance(mesh, gt)
+    return {"chamfer": cd.chamfer, "accuracy": cd.accuracy, "completeness": cd.completeness,
+            "fscore": cd.fscore, "faces": int(len(mesh.faces)), "mesh_s": round(mesh_s, 2)}, mesh
+
+
+def _image_metrics(field, dataset, n_views: int) -> dict:
+    """Mean colour-corrected PSNR/SSIM over ``n_views`` test cameras (foreground pixels)."""
+    import cv2
+
+    from hybridneus.evaluation import color_corrected_psnr_ssim
+    from hybridneus.rendering.views import inference_sampler, render_view
+
+    split = dataset.splits.get("test")
+    if split is None or split.rgb_paths is None or n_views <= 0:
+        return {}
+    sampler = inference_sampler(field)
+    background = np.asarray(dataset.preset.background, dtype=np.float32)
+    psnrs, ssims = [], []
+    for i in np.unique(np.linspace(0, split.n_views - 1, min(n_views, split.n_views)).round()):
+        i = int(i)
+        img = render_view(field, split.intrinsics[i], split.distortion[i], split.c2w[i],
+                          split.width, split.height, sampler)
+        gt = cv2.imread(str(split.rgb_paths[i]), cv2.IMREAD_COLOR)[..., ::-1] / 255.0
+        mask = np.abs(gt - background).max(axis=-1) > 2.0 / 255.0
+        if mask.any():
+            m = color_corrected_psnr_ssim(img.color, gt.astype(np.float32), mask)
+            psnrs.append(m.psnr)
+            ssims.append(m.ssim)
+    if not psnrs:
+        return {}
+    return {"psnr": float(np.mean(psnrs)), "ssim": float(np.mean(ssims))}
+
+
+def run_job(args) -> dict:
+    """Fit one (dataset, preset spec, budget) and score it; runs in its own process."""
+    import torch
+
+    from hybridneus.api import fit
+    from hybridneus.config import load_config
+    from hybridneus.data import load_dataset
+    from hybridneus.evaluation.geometry import sdf_mae
+    from hybridneus.fileio import atomic_path
+    from hybridneus.meshing.convert import load_mesh, save_mesh
+    from hybridneus.training.runs import build_field, load_checkpoint
+
+    torch.set_num_threads(args.threads)
+    preset, overrides = preset_spec(args.preset)
+    budget = args.minutes * 60.0
+    marks = [budget * k / args.curve for k in range(1, args.curve)]
+    snapshots: list[Path] = []
+    snap_dir = args.out_runs / "snapshots" / f"{Path(args.dataset).name}-{args.preset}"
+
+    def snapshot(trainer, logs) -> None:
+        # Fields along the way, for the CD-versus-time curve; the save is not counted in
+        # the budget (the trainer's clock only counts its steps).
+        if marks and trainer.elapsed >= marks[0]:
+            marks.pop(0)
+            path = snap_dir / f"t{trainer.elapsed:07.1f}-s{trainer.step}.pt"
+            with atomic_path(path) as tmp:
+                torch.save({"model": trainer.field.state_dict(), "elapsed": trainer.elapsed,
+                            "step": trainer.step}, tmp)
+            snapshots.append(path)
+
+    t0 = time.perf_counter()
+    field = fit(
+        args.dataset, preset, [snapshot],
+        overrides=[f"train.minutes={args.minutes}", "train.iters=100000000",
+                   f"train.threads={args.threads}", "train.preview_every=0", *overrides],
+        out=args.out_runs, device=args.device, progress=False,
+    )
+    fit_wall = time.perf_counter() - t0
+    run_dir = Path(field.run_dir)
+    cfg = load_config(run_dir / "config.yaml")
+    state = load_checkpoint(run_dir)
+    field = field.to("cpu").eval()
+    gt = load_mesh(Path(args.dataset) / "gt_mesh.ply")
+    curve = []
+    for path in snapshots:
+        snap = torch.load(path, map_location="cpu", weights_only=True)
+        f = build_field(cfg, state["scene"])
+        f.load_state_dict(snap["model"])
+        f.update_step(int(snap["step"]), int(state["total_steps"]))
+        score, _ = _score_field(f.eval(), gt, args.res)
+        curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), score["chamfer"]])
+    final, mesh = _score_field(field, gt, args.res)
+    curve.append([round(float(state["elapsed"]), 1), int(state["step"]), final["chamfer"]])
+    report = {
+        "scene": args.scene, "preset": args.preset, "minutes": args.minutes,
+        "noise": args.noise, "dataset": str(args.dataset), "run": str(run_dir),
+        "device": args.device, "threads": args.threads, "res": args.res,
+        "steps": int(state["step"]), "fit_s": round(float(state["elapsed"]), 1),
+        "fit_wall_s": round(fit_wall, 1), "inv_s": round(float(field.inv_s().detach()), 1),
+        **final, "curve": curve,
+    }
+    if mesh is not None and len(mesh.faces):
+        save_mesh(mesh, run_dir / "mesh.ply")
+        report["sdf_mae"] = float(sdf_mae(mesh, gt).mae)
+        report.update(_image_metrics(field, load_dataset(args.dataset), args.image_views))
+    report["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    return report
+
+
+# --------------------------------------------------------------------------- driver
+
+
+def _git_commit() -> str:
+    try:
+        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
+                             capture_output=True, text=True, check=True)
+        return out.stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def launch(args, scene: str, dataset: Path, spec: str, noise: tuple[float, float]) -> dict:
+    """Run one fit in a child process and append its JSON line to ``args.out``."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "_job", "--scene", scene,
+           "--dataset", str(dataset), "--preset", spec, "--minutes", str(args.minutes),
+           "--threads", str(args.threads), "--device", args.device, "--res", str(args.res),
+           "--curve", str(args.curve), "--image-views", str(args.image_views),
+           "--out-runs", str(args.out_runs), "--noise", json.dumps(list(noise))]
+    print(f"[suite] {scene} {spec} {args.minutes:g} min noise={noise}", file=sys.stderr,
+          flush=True)
+    proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"[suite] {scene} {spec}: the fit failed (exit {proc.returncode})")
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    report.update(date=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+                  commit=_git_commit(), machine=f"{os.cpu_count()} cpus")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    with open(args.out, "a") as fh:
+        fh.write(json.dumps(report) + "\n")
+    cd = report.get("chamfer")
+    print(f"[suite] {scene} {spec}: CD {cd if cd is None else round(cd, 4)} "
+          f"in {report['steps']} steps", file=sys.stderr, flush=True)
+    return report
+
+
+def read_results(path: Path) -> list[dict]:
+    """The latest line per (scene, preset, minutes, noise) of a results file."""
+    latest: dict[tuple, dict] = {}
+    if path.is_file():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                latest[(r["scene"], r["preset"], r["minutes"], tuple(r["noise"]))] = r
+    return list(latest.values())
+
+
+def _fmt(v, digits: int = 4) -> str:
+    return "-" if v is None else f"{v:.{digits}f}" if isinstance(v, float) else str(v)
+
+
+def report_tables(results: list[dict]) -> str:
+    """Markdown: one table of all fits, means per preset, and the issue's three ratios."""
+    clean = [r for r in results if tuple(r["noise"]) == (0.0, 0.0)]
+    lines = ["| scene | preset | min | steps | CD | acc | comp | F@1% | SDF-MAE | PSNR | SSIM |"
+             " mesh s | peak RSS MB |", "|" + "---|" * 13]
+    for r in sorted(clean, key=lambda r: (r["scene"], r["minutes"], r["preset"])):
+        lines.append(
+            f"| {r['scene']} | {r['preset']} | {r['minutes']:g} | {r['steps']} | "
+            f"{_fmt(r.get('chamfer'))} | {_fmt(r.get('accuracy'))} | "
+            f"{_fmt(r.get('completeness'))} | {_fmt(r.get('fscore'), 3)} | "
+            f"{_fmt(r.get('sdf_mae'))} | {_fmt(r.get('psnr'), 2)} | {_fmt(r.get('ssim'), 3)} | "
+            f"{_fmt(r.get('mesh_s'), 1)} | {r.get('peak_rss_mb', '-')} |")
+    lines += ["", "| preset | min | scenes | mean CD |", "|---|---|---|---|"]
+    groups: dict[tuple, list[float]] = {}
+    for r in clean:
+        if r.get("chamfer") is not None:
+            groups.setdefault((r["preset"], r["minutes"]), []).append(r["chamfer"])
+    for (preset, minutes), cds in sorted(groups.items()):
+        lines.append(f"| {preset} | {minutes:g} | {len(cds)} | {np.mean(cds):.4f} |")
+    lines += ["", "| scene | min | CD events / CD rgb (goal <= 1.3) | time for the hybrid to "
+              "reach the eventneus CD / eventneus time (goal <= 0.1) |", "|---|---|---|---|"]
+    by = {(r["scene"], r["minutes"], r["preset"]): r for r in clean}
+    for scene, minutes in sorted({(r["scene"], r["minutes"]) for r in clean}):
+        ev, rgb = by.get((scene, minutes, "fast")), by.get((scene, minutes, "fast-rgb"))
+        deep = by.get((scene, minutes, "eventneus"))
+        ratio = "-"
+        if ev and rgb and ev.get("chamfer") and rgb.get("chamfer"):
+            ratio = f"{ev['chamfer'] / rgb['chamfer']:.2f}"
+        reach = "-"
+        if ev and deep and deep.get("chamfer") is not None:
+            hits = [t for t, _, cd in ev["curve"] if cd is not None and cd <= deep["chamfer"]]
+            reach = f"{min(hits) / deep['fit_s']:.3f}" if hits else "not reached"
+        lines.append(f"| {scene} | {minutes:g} | {ratio} | {reach} |")
+    noisy = [r for r in results if tuple(r["noise"]) != (0.0, 0.0)]
+    if noisy:
+        lines += ["", "Noise sweep:", "",
+                  "| scene | preset | min | threshold sigma | background rate | CD |",
+                  "|---|---|---|---|---|---|"]
+        base = [r for r in clean if any(n["scene"] == r["scene"] and n["preset"] == r["preset"]
+                                        and n["minutes"] == r["minutes"] for n in noisy)]
+        for r in sorted(base + noisy, key=lambda r: (r["scene"], r["preset"], r["noise"])):
+            lines.append(f"| {r['scene']} | {r['preset']} | {r['minutes']:g} | "
+                         f"{r['noise'][0]:g} | {r['noise'][1]:g} | {_fmt(r.get('chamfer'))} |")
+    return "\n".join(lines)
+
+
+_COLOURS = ((200, 60, 0), (0, 120, 220), (0, 150, 0), (150, 0, 150), (0, 0, 0))
+
+
+def _plot_scene(scene: str, runs: list[dict]) -> np.ndarray:
+    """Chamfer (log scale) against fit seconds, a line and a legend entry per run."""
+    import cv2
+
+    w, h, pad = 640, 360, 50
+    img = np.full((h, w, 3), 255, np.uint8)
+    pts = [(t, cd) for r in runs for t, _, cd in r["curve"] if cd]
+    t1 = max(t for t, _ in pts) * 1.05
+    y0, y1 = np.log10(min(c for _, c in pts)) - 0.05, np.log10(max(c for _, c in pts)) + 0.05
+
+    def xy(t: float, cd: float) -> tuple[int, int]:
+        return (int(pad + t / t1 * (w - 2 * pad)),
+                int(h - pad - (np.log10(cd) - y0) / (y1 - y0) * (h - 2 * pad)))
+
+    font, black = cv2.FONT_HERSHEY_SIMPLEX, (0, 0, 0)
+    cv2.rectangle(img, (pad, pad), (w - pad, h - pad), (180, 180, 180), 1)
+    for cd in (0.006, 0.01, 0.015, 0.02, 0.03, 0.05, 0.1, 0.2):
+        if y0 <= np.log10(cd) <= y1:
+            _, y = xy(0, cd)
+            cv2.line(img, (pad - 4, y), (pad, y), black, 1)
+            cv2.putText(img, f"{cd:g}", (4, y + 4), font, 0.35, black, 1)
+            if cd == 0.015:  # the issue's goal
+                cv2.line(img, (pad, y), (w - pad, y), (200, 200, 200), 1)
+    for k, r in enumerate(sorted(runs, key=lambda r: (r["preset"], r["minutes"]))):
+        colour = _COLOURS[k % len(_COLOURS)]
+        poly = [xy(t, cd) for t, _, cd in r["curve"] if cd]
+        for p in poly:
+            cv2.circle(img, p, 3, colour, -1, cv2.LINE_AA)
+        cv2.polylines(img, [np.array(poly, np.int32)], False, colour, 1, cv2.LINE_AA)
+        label = f"{r['preset']} ({r['minutes']:g} min)"
+        cv2.putText(img, label, (w - pad - 170, pad + 16 + 16 * k), font, 0.45, colour, 1,
+                    cv2.LINE_AA)
+    cv2.putText(img, f"{scene}: Chamfer (log) vs fit seconds (0 to {t1:.0f} s)",
+                (pad, pad - 12), font, 0.45, black, 1, cv2.LINE_AA)
+    return img
+
+
+def plot_curves(results: list[dict], folder: Path) -> list[Path]:
+    """One PNG per scene (``suite-<scene>.png``): CD against fit seconds per preset."""
+    import cv2
+
+    from hybridneus.fileio import atomic_path
+
+    written = []
+    for scene in sorted({r["scene"] for r in results}):
+        runs = [r for r in results if r["scene"] == scene and tuple(r["noise"]) == (0.0, 0.0)]
+        if not any(cd for r in runs for _, _, cd in r["curve"]):
+            continue
+        ok, buf = cv2.imencode(".png", _plot_scene(scene, runs))
+        path = folder / f"suite-{scene}.png"
+        folder.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(buf.tobytes())
+        written.append(path)
+    return written
+
+
+def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "_job":
+        ap = argparse.ArgumentParser()
+        for name in ("--scene", "--dataset", "--preset", "--device"):
+            ap.add_argument(name, required=True)
+        for name, kind in (("--minutes", float), ("--threads", int), ("--res", int),
+                           ("--curve", int), ("--image-views", int)):
+            ap.add_argument(name, type=kind, required=True)
+        ap.add_argument("--out-runs", type=Path, required=True)
+        ap.add_argument("--noise", type=json.loads, required=True)
+        print(json.dumps(run_job(ap.parse_args(sys.argv[2:]))))
+        return
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 epilog="\n".join(__doc__.splitlines()[1:]))
+    ap.add_argument("--assets", type=Path, default=DEFAULT_ASSETS)
+    ap.add_argument("--scenes", nargs="+", help="asset names (default: every asset folder)")
+    ap.add_argument("--presets", nargs="+", default=["fast", "eventneus", "fast-rgb"])
+    ap.add_argument("--minutes", type=float, default=15.0, help="fit budget per run")
+    ap.add_argument("--curve", type=int, default=5, help="points on the CD-vs-time curve")
+    ap.add_argument("--res", type=int, default=300, help="marching-cubes resolution")
+    ap.add_argument("--views", type=int, default=999)
+    ap.add_argument("--width", type=int, default=346)
+    ap.add_argument("--height", type=int, default=260)
+    ap.add_argument("--test-views", type=int, default=8, help="test split for PSNR/SSIM")
+    ap.add_argument("--image-views", type=int, default=4, help="test views rendered per fit")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
+    ap.add_argument("--out-runs", type=Path, default=Path("/tmp/hybridneus-bench/suite-runs"))
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON-lines results file")
+    ap.add_argument("--plots", type=Path, default=DEFAULT_PLOTS)
+    ap.add_argument("--noise-sweep", metavar="SCENE",
+                    help="instead of the presets grid: fit SCENE with the first preset at "
+                    f"each noise level {NOISE_LEVELS}")
+    ap.add_argument("--report", action="store_true", help="only print tables, write plots")
+    args = ap.parse_args()
+
+    if not args.report:
+        scenes = find_scenes(args.assets)
+        if not scenes:
+            raise SystemExit(f"{args.assets}: no asset folder with a mesh")
+        wanted = [args.noise_sweep] if args.noise_sweep else (args.scenes or list(scenes))
+        missing = [s for s in wanted if s not in scenes]
+        if missing:
+            raise SystemExit(f"{args.assets}: no asset {missing[0]!r}; found {sorted(scenes)}")
+        levels = NOISE_LEVELS if args.noise_sweep else ((0.0, 0.0),)
+        specs = args.presets[:1] if args.noise_sweep else args.presets
+        for scene in wanted:
+            for noise in levels:
+                data = dataset_for(scene, scenes[scene], args, noise)
+                for spec in specs:
+                    launch(args, scene, data, spec, noise)
+    results = read_results(args.out)
+    print(report_tables(results))
+    for path in plot_curves(results, args.plots):
+        print(f"[suite] wrote {path}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
