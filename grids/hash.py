@@ -43,6 +43,9 @@ class _MultiresGrid(nn.Module):
         #: Points per chunk, bounding the per-level (8, chunk * F) temporaries; None picks
         #: 2**18 on CPU and 2**20 on CUDA, as measured in docs/benchmarks/grids.md.
         self.chunk_size: int | None = None
+        #: Largest (levels, 8, n * F) corner buffer, in bytes, encoded with all levels
+        #: batched; larger batches go level by level (CPU only; CUDA always batches).
+        self.batch_bytes = 32 << 20
         # Coarse levels are dense and fine ones hashed (side grows with the level).
         self.n_dense = sum(not lvl.hashed for lvl in levels)
         if any(lvl.hashed for lvl in levels[: self.n_dense]):
@@ -64,8 +67,13 @@ class _MultiresGrid(nn.Module):
         )
         dense_offsets = corner[:, 0] * sides[:, None] ** 2 + corner[:, 1] * sides[:, None]
         dense_offsets = dense_offsets + corner[:, 2]
-        # (n_levels, 8) row offsets of the 8 corners in each dense level.
-        self.register_buffer("_dense_offsets", dense_offsets, persistent=False)
+        buffers = {
+            "sides": sides,
+            "masks": torch.tensor(sizes, dtype=torch.int64) - 1,
+            "dense_offsets": dense_offsets,  # (n_levels, 8)
+        }
+        for name, value in buffers.items():
+            self.register_buffer("_" + name, value, persistent=False)
 
     def set_active_levels(self, n: int) -> None:
         """Use only the ``n`` coarsest levels; finer levels are skipped and output zeros.
@@ -92,8 +100,40 @@ class _MultiresGrid(nn.Module):
             ``frac`` is differentiable w.r.t. ``xt`` (d frac / d x = scale); ``idx`` is
             piecewise constant.
         """
-        per_level = [self._level_corners(xt, lvl) for lvl in range(self.active_levels)]
-        return (torch.stack([i for i, _ in per_level]), torch.stack([f for _, f in per_level]))
+        n_act, n = self.active_levels, xt.shape[1]
+        # Built from Python floats each call so module.float()/.half() cannot round them.
+        scales = torch.tensor(
+            [lvl.scale for lvl in self.levels[:n_act]], dtype=xt.dtype, device=xt.device
+        )
+        pos = xt.unsqueeze(0) * scales.view(n_act, 1, 1) + 0.5
+        cell = pos.detach().floor()
+        frac = pos - cell  # (n_act, 3, n)
+        dtype = self._index_dtype()
+        ic = cell.to(dtype)
+        n_dense = min(self.n_dense, n_act)
+        idx = torch.empty(n_act, 8, n, dtype=dtype, device=xt.device)
+        if n_dense:
+            sides = self._sides[:n_dense].to(dtype).view(n_dense, 1)
+            # Points outside [0, 1]^3 are clamped to the border cell so rows stay in range.
+            icd = torch.minimum(ic[:n_dense].clamp_min(0), (sides - 2).unsqueeze(-1))
+            base = icd[:, 0] + icd[:, 1] * sides + icd[:, 2] * (sides * sides)
+            offsets = self._dense_offsets[:n_dense].to(dtype).unsqueeze(-1)
+            torch.add(base.unsqueeze(1), offsets, out=idx[:n_dense])
+        n_hash = n_act - n_dense
+        if n_hash:
+            ich = ic[n_dense:]
+            masks = self._masks[n_dense:n_act].to(dtype).view(n_hash, 1, 1)
+            # Masking each axis term first is exact for XOR; int32 products wrap modulo
+            # 2**32 like tcnn's uint32 hash, so int32 and int64 give the same rows.
+            p1, p2 = (_wrap(p, dtype) for p in PRIMES[1:])
+            iy = ich[:, 1] * p1
+            iz = ich[:, 2] * p2
+            hx = torch.stack((ich[:, 0], ich[:, 0] + 1), dim=1) & masks
+            hy = torch.stack((iy, iy + p1), dim=1) & masks
+            hz = torch.stack((iz, iz + p2), dim=1) & masks
+            h = (hz.view(n_hash, 2, 1, n) ^ hy.view(n_hash, 1, 2, n)).view(n_hash, 4, 1, n)
+            torch.bitwise_xor(h, hx.view(n_hash, 1, 2, n), out=idx[n_dense:].view(n_hash, 4, 2, n))
+        return idx, frac
 
     def _index_dtype(self) -> torch.dtype:
         # int32 rows only while every row number fits (huge dense levels need int64).
@@ -127,6 +167,31 @@ class _MultiresGrid(nn.Module):
         return (h ^ hx.view(1, 2, n)).view(8, n), frac
 
     def _encode(self, xt: torch.Tensor) -> torch.Tensor:
+        """(3, n) -> (n, out_dim): all levels at once for small batches, else level by level.
+
+        Batching the levels costs fewer, larger ops, which wins while its
+        (n_levels, 8, n * F) temporaries stay small; above ``batch_bytes`` they no longer
+        fit glibc's reusable heap and per-level encoding wins (docs/benchmarks/grids.md).
+        """
+        size = self.active_levels * 8 * xt.shape[1] * self.n_features_per_level
+        if xt.is_cuda or size * xt.element_size() <= self.batch_bytes:
+            return self._encode_batched(xt)
+        return self._encode_per_level(xt)
+
+    def _encode_batched(self, xt: torch.Tensor) -> torch.Tensor:
+        """(3, n) -> (n, out_dim), all active levels in one set of ops."""
+        n, n_feat, n_act = xt.shape[1], self.n_features_per_level, self.active_levels
+        idx, frac = self.corners(xt)
+        if n_feat > 1:
+            # Repeat per feature so every lerp runs on contiguous (n_act, n * F) memory.
+            frac = frac.unsqueeze(-1).expand(n_act, 3, n, n_feat).reshape(n_act, 3, n * n_feat)
+        corners = gather_levels([self.tables[i] for i in range(n_act)], idx)
+        feats = trilinear(corners, frac).view(n_act, n, n_feat).transpose(0, 1)
+        if n_act < self.n_levels:
+            feats = torch.cat((feats, feats.new_zeros(n, self.n_levels - n_act, n_feat)), dim=1)
+        return feats.reshape(n, self.out_dim)
+
+    def _encode_per_level(self, xt: torch.Tensor) -> torch.Tensor:
         """(3, n) -> (n, out_dim), one level at a time.
 
         Level by level keeps every temporary at <= 64 bytes per point (16 MB for 2**18
