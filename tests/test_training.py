@@ -106,7 +106,7 @@ def test_short_fit_pulls_the_zero_level_onto_the_true_surface(scene):
 
     gt = load_mesh(scene / "gt_mesh.ply")
     points = trimesh.sample.sample_surface(gt, 4000, seed=0)[0].astype(np.float32)
-    cfg = tiny("train.iters=150", "train.seed=0")
+    cfg = tiny("train.iters=400", "train.seed=0")
     trainer, _ = prepare(scene, cfg, device="cpu")
 
     def surface_error() -> float:
