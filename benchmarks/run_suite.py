@@ -171,7 +171,10 @@ def run_job(args) -> dict:
     state = load_checkpoint(run_dir)
     field = field.to("cpu").eval()
     gt = load_mesh(Path(args.dataset) / "gt_mesh.ply")
-    curve = []
+    # The untrained field (same seed, same construction as the trainer's) starts the curve.
+    torch.manual_seed(cfg.train.seed)
+    initial, _ = _score_field(build_field(cfg, state["scene"]).eval(), gt, args.res)
+    curve = [[0.0, 0, initial["chamfer"]]]
     for path in snapshots:
         snap = torch.load(path, map_location="cpu", weights_only=True)
         f = build_field(cfg, state["scene"])
