@@ -100,29 +100,37 @@ class _MultiresGrid(nn.Module):
             ``frac`` is differentiable w.r.t. ``xt`` (d frac / d x = scale); ``idx`` is
             piecewise constant.
         """
-        n_act, n = self.active_levels, xt.shape[1]
+        return self._corners(xt, 0, self.active_levels)
+
+    def _index_dtype(self) -> torch.dtype:
+        # int32 rows only while every row number fits (huge dense levels need int64).
+        return self.index_dtype if max(self._sizes) < 2**31 else torch.int64
+
+    def _corners(self, xt: torch.Tensor, lo: int, hi: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`corners` of levels ``lo .. hi - 1``: idx (hi - lo, 8, n), frac (hi - lo, 3, n)."""
+        n_lev, n = hi - lo, xt.shape[1]
         # Built from Python floats each call so module.float()/.half() cannot round them.
         scales = torch.tensor(
-            [lvl.scale for lvl in self.levels[:n_act]], dtype=xt.dtype, device=xt.device
+            [lvl.scale for lvl in self.levels[lo:hi]], dtype=xt.dtype, device=xt.device
         )
-        pos = xt.unsqueeze(0) * scales.view(n_act, 1, 1) + 0.5
+        pos = xt.unsqueeze(0) * scales.view(n_lev, 1, 1) + 0.5
         cell = pos.detach().floor()
-        frac = pos - cell  # (n_act, 3, n)
+        frac = pos - cell  # (n_lev, 3, n)
         dtype = self._index_dtype()
         ic = cell.to(dtype)
-        n_dense = min(self.n_dense, n_act)
-        idx = torch.empty(n_act, 8, n, dtype=dtype, device=xt.device)
+        n_dense = max(0, min(self.n_dense, hi) - lo)  # dense levels come first
+        idx = torch.empty(n_lev, 8, n, dtype=dtype, device=xt.device)
         if n_dense:
-            sides = self._sides[:n_dense].to(dtype).view(n_dense, 1)
+            sides = self._sides[lo : lo + n_dense].to(dtype).view(n_dense, 1)
             # Points outside [0, 1]^3 are clamped to the border cell so rows stay in range.
             icd = torch.minimum(ic[:n_dense].clamp_min(0), (sides - 2).unsqueeze(-1))
             base = icd[:, 0] + icd[:, 1] * sides + icd[:, 2] * (sides * sides)
-            offsets = self._dense_offsets[:n_dense].to(dtype).unsqueeze(-1)
+            offsets = self._dense_offsets[lo : lo + n_dense].to(dtype).unsqueeze(-1)
             torch.add(base.unsqueeze(1), offsets, out=idx[:n_dense])
-        n_hash = n_act - n_dense
+        n_hash = n_lev - n_dense
         if n_hash:
             ich = ic[n_dense:]
-            masks = self._masks[n_dense:n_act].to(dtype).view(n_hash, 1, 1)
+            masks = self._masks[lo + n_dense : hi].to(dtype).view(n_hash, 1, 1)
             # Masking each axis term first is exact for XOR; int32 products wrap modulo
             # 2**32 like tcnn's uint32 hash, so int32 and int64 give the same rows.
             p1, p2 = (_wrap(p, dtype) for p in PRIMES[1:])
@@ -135,83 +143,35 @@ class _MultiresGrid(nn.Module):
             torch.bitwise_xor(h, hx.view(n_hash, 1, 2, n), out=idx[n_dense:].view(n_hash, 4, 2, n))
         return idx, frac
 
-    def _index_dtype(self) -> torch.dtype:
-        # int32 rows only while every row number fits (huge dense levels need int64).
-        return self.index_dtype if max(self._sizes) < 2**31 else torch.int64
-
-    def _level_corners(self, xt: torch.Tensor, lvl: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """One level of :meth:`corners`: idx (8, n) and frac (3, n)."""
-        level, n = self.levels[lvl], xt.shape[1]
-        pos = xt * level.scale + 0.5
-        cell = pos.detach().floor()
-        frac = pos - cell
-        dtype = self._index_dtype()
-        ic = cell.to(dtype)
-        if not level.hashed:
-            side = level.side
-            # Points outside [0, 1]^3 are clamped to the border cell so rows stay in range.
-            ic = ic.clamp_(0, side - 2)
-            base = ic[0] + ic[1] * side + ic[2] * (side * side)
-            offsets = self._dense_offsets[lvl].to(dtype).unsqueeze(-1)
-            return base.unsqueeze(0) + offsets, frac
-        mask = level.table_size - 1
-        # Masking each axis term first is exact for XOR; int32 products wrap modulo 2**32
-        # like tcnn's uint32 hash, so int32 and int64 give the same rows.
-        p1, p2 = (_wrap(p, dtype) for p in PRIMES[1:])
-        iy = ic[1] * p1
-        iz = ic[2] * p2
-        hx = torch.stack((ic[0], ic[0] + 1)) & mask
-        hy = torch.stack((iy, iy + p1)) & mask
-        hz = torch.stack((iz, iz + p2)) & mask
-        h = (hz.view(2, 1, n) ^ hy.view(1, 2, n)).view(4, 1, n)
-        return (h ^ hx.view(1, 2, n)).view(8, n), frac
-
     def _encode(self, xt: torch.Tensor) -> torch.Tensor:
         """(3, n) -> (n, out_dim): all levels at once for small batches, else level by level.
 
         Batching the levels costs fewer, larger ops, which wins while its
-        (n_levels, 8, n * F) temporaries stay small; above ``batch_bytes`` they no longer
-        fit glibc's reusable heap and per-level encoding wins (docs/benchmarks/grids.md).
+        (n_levels, 8, n * F) temporaries stay small. Above ``batch_bytes`` they no longer fit
+        glibc's reusable heap: every call then maps and page-faults fresh memory, which cost
+        more than the gathers themselves here, so larger chunks go level by level (<= 64
+        bytes per point; docs/benchmarks/grids.md).
         """
-        size = self.active_levels * 8 * xt.shape[1] * self.n_features_per_level
-        if xt.is_cuda or size * xt.element_size() <= self.batch_bytes:
-            return self._encode_batched(xt)
-        return self._encode_per_level(xt)
-
-    def _encode_batched(self, xt: torch.Tensor) -> torch.Tensor:
-        """(3, n) -> (n, out_dim), all active levels in one set of ops."""
         n, n_feat, n_act = xt.shape[1], self.n_features_per_level, self.active_levels
-        idx, frac = self.corners(xt)
+        size = n_act * 8 * n * n_feat * xt.element_size()
+        if xt.is_cuda or size <= self.batch_bytes:
+            feats = [self._encode_levels(xt, 0, n_act)]
+        else:
+            feats = [self._encode_levels(xt, lvl, lvl + 1) for lvl in range(n_act)]
+        if n_act < self.n_levels:
+            feats.append(xt.new_zeros(n, (self.n_levels - n_act) * n_feat))
+        return feats[0] if len(feats) == 1 else torch.cat(feats, dim=1)
+
+    def _encode_levels(self, xt: torch.Tensor, lo: int, hi: int) -> torch.Tensor:
+        """(3, n) -> (n, (hi - lo) * F): levels ``lo .. hi - 1`` in one set of ops."""
+        n, n_feat, n_lev = xt.shape[1], self.n_features_per_level, hi - lo
+        idx, frac = self._corners(xt, lo, hi)
         if n_feat > 1:
-            # Repeat per feature so every lerp runs on contiguous (n_act, n * F) memory.
-            frac = frac.unsqueeze(-1).expand(n_act, 3, n, n_feat).reshape(n_act, 3, n * n_feat)
-        corners = gather_levels([self.tables[i] for i in range(n_act)], idx)
-        feats = trilinear(corners, frac).view(n_act, n, n_feat).transpose(0, 1)
-        if n_act < self.n_levels:
-            feats = torch.cat((feats, feats.new_zeros(n, self.n_levels - n_act, n_feat)), dim=1)
-        return feats.reshape(n, self.out_dim)
-
-    def _encode_per_level(self, xt: torch.Tensor) -> torch.Tensor:
-        """(3, n) -> (n, out_dim), one level at a time.
-
-        Level by level keeps every temporary at <= 64 bytes per point (16 MB for 2**18
-        points): glibc then reuses freed heap blocks instead of mapping and page-faulting
-        fresh memory on every call, which cost more than the gathers themselves here
-        (docs/benchmarks/grids.md). Each level's table gradient is also scattered once per
-        call instead of once per chunk.
-        """
-        n, n_feat, n_act = xt.shape[1], self.n_features_per_level, self.active_levels
-        feats = []
-        for lvl in range(n_act):
-            idx, frac = self._level_corners(xt, lvl)
-            if n_feat > 1:
-                # Repeat per feature so every lerp runs on contiguous (n * F) memory.
-                frac = frac.unsqueeze(-1).expand(3, n, n_feat).reshape(3, n * n_feat)
-            corners = gather_levels([self.tables[lvl]], idx.unsqueeze(0))
-            feats.append(trilinear(corners, frac).view(n, n_feat))
-        if n_act < self.n_levels:
-            feats.append(feats[0].new_zeros(n, (self.n_levels - n_act) * n_feat))
-        return torch.cat(feats, dim=1)
+            # Repeat per feature so every lerp runs on contiguous (n_lev, n * F) memory.
+            frac = frac.unsqueeze(-1).expand(n_lev, 3, n, n_feat).reshape(n_lev, 3, n * n_feat)
+        corners = gather_levels([self.tables[i] for i in range(lo, hi)], idx)
+        feats = trilinear(corners, frac).view(n_lev, n, n_feat).transpose(0, 1)
+        return feats.reshape(n, n_lev * n_feat)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Encode points.
