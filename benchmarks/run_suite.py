@@ -397,6 +397,9 @@ def main() -> None:
     ap.add_argument("--noise-sweep", metavar="SCENE",
                     help="instead of the presets grid: fit SCENE with the first preset at "
                     f"each noise level {NOISE_LEVELS}")
+    ap.add_argument("--noise-levels", nargs="+", metavar="SIGMA:RATE",
+                    help="noise levels of the sweep, threshold sigma : background rate "
+                    "(default: every level of NOISE_LEVELS)")
     ap.add_argument("--report", action="store_true", help="only print tables, write plots")
     args = ap.parse_args()
 
@@ -408,7 +411,11 @@ def main() -> None:
         missing = [s for s in wanted if s not in scenes]
         if missing:
             raise SystemExit(f"{args.assets}: no asset {missing[0]!r}; found {sorted(scenes)}")
-        levels = NOISE_LEVELS if args.noise_sweep else ((0.0, 0.0),)
+        levels: tuple[tuple[float, float], ...] = ((0.0, 0.0),)
+        if args.noise_sweep:
+            levels = NOISE_LEVELS
+            if args.noise_levels:
+                levels = tuple(tuple(float(v) for v in lv.split(":")) for lv in args.noise_levels)
         specs = args.presets[:1] if args.noise_sweep else args.presets
         for scene in wanted:
             for noise in levels:
