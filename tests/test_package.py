@@ -58,3 +58,30 @@ def test_unknown_command_exits_2() -> None:
     out = subprocess.run(args, capture_output=True, text=True)
     assert out.returncode == 2
     assert "Traceback" not in out.stderr
+
+
+def test_atomic_outputs_keep_nothing_half_written_and_get_umask_modes(tmp_path) -> None:
+    import os
+
+    import pytest
+
+    from hybridneus.fileio import atomic_dir, atomic_path
+
+    mask = os.umask(0o022)
+    try:
+        target = tmp_path / "out.txt"
+        with pytest.raises(RuntimeError), atomic_path(target) as tmp:
+            tmp.write_text("partial")
+            raise RuntimeError("interrupted")
+        assert not target.exists() and list(tmp_path.iterdir()) == []
+        with atomic_path(target) as tmp:
+            tmp.write_text("done")
+        assert target.read_text() == "done"
+        # mkstemp creates 0600; finished outputs must be readable like any other file.
+        assert target.stat().st_mode & 0o777 == 0o644
+        with atomic_dir(tmp_path / "folder") as d:
+            (d / "a").write_text("x")
+        assert (tmp_path / "folder" / "a").read_text() == "x"
+        assert (tmp_path / "folder").stat().st_mode & 0o777 == 0o755
+    finally:
+        os.umask(mask)
