@@ -216,8 +216,13 @@ def _git_commit() -> str:
         return "unknown"
 
 
-def launch(args, scene: str, dataset: Path, spec: str, noise: tuple[float, float]) -> dict:
-    """Run one fit in a child process and append its JSON line to ``args.out``."""
+def launch(
+    args, scene: str, dataset: Path, spec: str, noise: tuple[float, float]
+) -> dict | None:
+    """Run one fit in a child process and append its JSON line to ``args.out``.
+
+    A failed fit is reported on stderr and skipped (None), so one scene cannot stop a suite.
+    """
     cmd = [sys.executable, str(Path(__file__).resolve()), "_job", "--scene", scene,
            "--dataset", str(dataset), "--preset", spec, "--minutes", str(args.minutes),
            "--threads", str(args.threads), "--device", args.device, "--res", str(args.res),
@@ -227,7 +232,9 @@ def launch(args, scene: str, dataset: Path, spec: str, noise: tuple[float, float
           flush=True)
     proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
     if proc.returncode != 0:
-        raise SystemExit(f"[suite] {scene} {spec}: the fit failed (exit {proc.returncode})")
+        print(f"[suite] {scene} {spec}: the fit failed (exit {proc.returncode}); skipped",
+              file=sys.stderr, flush=True)
+        return None
     report = json.loads(proc.stdout.strip().splitlines()[-1])
     report.update(date=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
                   commit=_git_commit(), machine=f"{os.cpu_count()} cpus")
