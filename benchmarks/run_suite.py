@@ -102,25 +102,25 @@ def _score_field(field, gt, res: int) -> dict:
 
 def _image_metrics(field, dataset, n_views: int) -> dict:
     """Mean colour-corrected PSNR/SSIM over ``n_views`` test cameras (foreground pixels)."""
-    import cv2
-
     from hybridneus.evaluation import color_corrected_psnr_ssim
+    from hybridneus.evaluation.images import foreground_mask, read_frame
     from hybridneus.rendering.views import inference_sampler, render_view
 
     split = dataset.splits.get("test")
     if split is None or split.rgb_paths is None or n_views <= 0:
         return {}
     sampler = inference_sampler(field)
-    background = np.asarray(dataset.preset.background, dtype=np.float32)
     psnrs, ssims = [], []
     for i in np.unique(np.linspace(0, split.n_views - 1, min(n_views, split.n_views)).round()):
         i = int(i)
-        img = render_view(field, split.intrinsics[i], split.distortion[i], split.c2w[i],
-                          split.width, split.height, sampler)
-        gt = cv2.imread(str(split.rgb_paths[i]), cv2.IMREAD_COLOR)[..., ::-1] / 255.0
-        mask = np.abs(gt - background).max(axis=-1) > 2.0 / 255.0
+        gt = read_frame(split.rgb_paths[i], split.width, split.height)
+        if gt is None:
+            continue
+        mask = foreground_mask(gt, dataset.preset.background)
         if mask.any():
-            m = color_corrected_psnr_ssim(img.color, gt.astype(np.float32), mask)
+            img = render_view(field, split.intrinsics[i], split.distortion[i], split.c2w[i],
+                              split.width, split.height, sampler)
+            m = color_corrected_psnr_ssim(img.color, gt, mask)
             psnrs.append(m.psnr)
             ssims.append(m.ssim)
     if not psnrs:

@@ -26,16 +26,6 @@ def _write_png(path: Path, rgb) -> None:
             raise OSError(f"{path}: could not write PNG")
 
 
-def _read_rgb(path: Path, width: int, height: int):
-    """The reference frame as (height, width, 3) float in [0, 1], or None if unusable."""
-    import cv2
-
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None or img.shape[:2] != (height, width):
-        return None  # real scenes ship placeholders of another size
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB).astype("float32") / 255.0
-
-
 def _render_test_views(field, dataset, split_name: str, out: Path, max_views: int, stride: int):
     import json
 
@@ -43,6 +33,7 @@ def _render_test_views(field, dataset, split_name: str, out: Path, max_views: in
 
     from hybridneus.errors import DatasetError
     from hybridneus.evaluation import color_corrected_psnr_ssim
+    from hybridneus.evaluation.images import foreground_mask, read_frame
     from hybridneus.fileio import atomic_path
     from hybridneus.progress import make_progress
     from hybridneus.rendering.views import inference_sampler, render_view
@@ -70,10 +61,9 @@ def _render_test_views(field, dataset, split_name: str, out: Path, max_views: in
             row = {"view": int(i)}
             gt = None
             if split.rgb_paths is not None and stride == 1:
-                gt = _read_rgb(split.rgb_paths[i], split.width, split.height)
+                gt = read_frame(split.rgb_paths[i], split.width, split.height)
             if gt is not None:
-                # Foreground: pixels of the reference that differ from the constant background.
-                mask = np.abs(gt - background).max(axis=-1) > 2.0 / 255.0
+                mask = foreground_mask(gt, background)
                 if mask.any():
                     m = color_corrected_psnr_ssim(img.color, gt, mask)
                     row.update(psnr=m.psnr, ssim=m.ssim)

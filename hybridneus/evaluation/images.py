@@ -113,3 +113,20 @@ def color_corrected_psnr_ssim(
         gain=tuple(float(v) for v in gain),
         offset=tuple(float(v) for v in offset),
     )
+
+
+def read_frame(path, width: int, height: int) -> np.ndarray | None:
+    """A reference frame as (height, width, 3) float32 RGB in [0, 1], or None when the file
+    is unreadable or of another size (real scenes ship placeholder frames)."""
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None or img.shape[:2] != (height, width):
+        return None
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB).astype(np.float32) / 255.0
+
+
+def foreground_mask(gt: np.ndarray, background, tol: float = 2.0 / 255.0) -> np.ndarray:
+    """(height, width) bool: pixels of ``gt`` that differ from the constant ``background``
+    (RGB in [0, 1]) by more than ``tol`` in some channel, i.e. where the object is."""
+    return np.abs(gt - np.asarray(background, dtype=np.float32)).max(axis=-1) > tol
