@@ -16,9 +16,13 @@ Preset specs: ``fast``, ``quality``, ``eventneus`` (the paper's deep MLPs), and 
     python benchmarks/run_suite.py --noise-sweep bunny --minutes 5  # sensor-noise sweep
     python benchmarks/run_suite.py --report                         # tables + plots only
 
+A machine without the meshing libraries (a GPU host) can fit with ``--fit-only``; each run
+folder then holds ``fit.json`` and ``snapshots/``, and ``--score-runs RUN...`` scores them here
+(the dataset found by name under ``--cache``).
+
 Results are appended to ``benchmarks/results/suite.jsonl`` (earlier lines are kept, so
 progress stays visible); ``--report`` prints markdown tables of the latest line per
-(scene, preset, budget, noise) and writes the CD-versus-time plots to ``docs/benchmarks/``.
+(scene, preset, budget, noise, device) and writes the CD-versus-time plots to ``docs/benchmarks/``.
 """
 
 from __future__ import annotations
@@ -64,8 +68,12 @@ def find_scenes(assets: Path) -> dict[str, Path]:
     return scenes
 
 
-def dataset_for(scene: str, mesh: Path, args, noise: tuple[float, float]) -> Path:
-    """Simulate (once) and return the dataset folder of ``scene`` at the suite's size."""
+def dataset_for(scene: str, mesh: Path | None, args, noise: tuple[float, float]) -> Path:
+    """Simulate (once) and return the dataset folder of ``scene`` at the suite's size.
+
+    A dataset already in ``args.cache`` needs no mesh (``mesh`` None): a machine without the
+    assets or the simulator's ray caster can fit a carried copy.
+    """
     from hybridneus.simulate import NoiseConfig, SimulationConfig, simulate_dataset
 
     tag = f"{scene}-{args.views}v-{args.width}x{args.height}-t{args.test_views}"
@@ -73,6 +81,8 @@ def dataset_for(scene: str, mesh: Path, args, noise: tuple[float, float]) -> Pat
         tag += f"-noise{noise[0]:g}-{noise[1]:g}"
     folder = args.cache / tag
     if not (folder / "scene.json").is_file():
+        if mesh is None:
+            raise SystemExit(f"{args.assets}: no asset {scene!r} and no {folder} to fit")
         print(f"[suite] simulating {folder}", file=sys.stderr, flush=True)
         cfg = SimulationConfig(
             n_views=args.views, width=args.width, height=args.height, revolutions=8.0,
@@ -128,78 +138,133 @@ def _image_metrics(field, dataset, n_views: int) -> dict:
     return {"psnr": float(np.mean(psnrs)), "ssim": float(np.mean(ssims))}
 
 
-def run_job(args) -> dict:
-    """Fit one (dataset, preset spec, budget) and score it; runs in its own process."""
+def fit_run(args) -> Path:
+    """Fit one (dataset, preset spec, budget); return its run folder.
+
+    Besides the trainer's own files the run folder gets ``snapshots/`` (the field along the
+    way and at the end, each file self-contained: weights, step, schedule length, scene) and
+    ``fit.json`` (what was fitted, where, for how long). That is all :func:`score_run` needs,
+    so fits made on another machine (a GPU host without the meshing libraries) can be scored
+    here from those files alone.
+    """
     import torch
 
     from hybridneus.api import fit
-    from hybridneus.config import load_config
-    from hybridneus.data import load_dataset
-    from hybridneus.evaluation.geometry import sdf_mae
     from hybridneus.fileio import atomic_path
-    from hybridneus.meshing.convert import load_mesh, save_mesh
-    from hybridneus.training.runs import build_field, load_checkpoint
 
     torch.set_num_threads(args.threads)
     preset, overrides = preset_spec(args.preset)
     budget = args.minutes * 60.0
     marks = [budget * k / args.curve for k in range(1, args.curve)]
-    snapshots: list[Path] = []
-    snap_dir = args.out_runs / "snapshots" / f"{Path(args.dataset).name}-{args.preset}"
+
+    def save(trainer, snap_dir: Path) -> None:
+        path = snap_dir / f"t{trainer.elapsed:07.1f}-s{trainer.step}.pt"
+        with atomic_path(path) as tmp:
+            torch.save({"model": trainer.field.state_dict(), "elapsed": trainer.elapsed,
+                        "step": trainer.step, "total_steps": trainer.total_steps,
+                        "scene": dict(trainer.scene)}, tmp)
+
+    # The run folder is named by fit() once training starts; the snapshots wait beside it.
+    staging = args.out_runs / f".snapshots-{os.getpid()}"
+    last: list = []
 
     def snapshot(trainer, logs) -> None:
-        # Fields along the way, for the CD-versus-time curve; the save is not counted in
-        # the budget (the trainer's clock only counts its steps).
+        # The save is not counted in the budget (the trainer's clock only counts its steps).
+        last[:] = [trainer]
         if marks and trainer.elapsed >= marks[0]:
             marks.pop(0)
-            path = snap_dir / f"t{trainer.elapsed:07.1f}-s{trainer.step}.pt"
-            with atomic_path(path) as tmp:
-                torch.save({"model": trainer.field.state_dict(), "elapsed": trainer.elapsed,
-                            "step": trainer.step}, tmp)
-            snapshots.append(path)
+            save(trainer, staging)
 
     t0 = time.perf_counter()
     field = fit(
         args.dataset, preset, [snapshot],
         overrides=[f"train.minutes={args.minutes}", "train.iters=100000000",
-                   f"train.threads={args.threads}", "train.preview_every=0", *overrides],
+                   f"train.threads={args.threads}", "train.preview_every=0", *overrides,
+                   *args.overrides],
         out=args.out_runs, device=args.device, progress=False,
     )
     fit_wall = time.perf_counter() - t0
-    fit_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     run_dir = Path(field.run_dir)
+    trainer = last[0]
+    save(trainer, staging)
+    staging.rename(run_dir / "snapshots")
+    info = {
+        # A fit with --set overrides is a variant of its preset, named apart in the results.
+        "scene": args.scene, "preset": " ".join([args.preset, *args.overrides]),
+        "overrides": args.overrides, "minutes": args.minutes, "noise": args.noise,
+        "dataset": str(Path(args.dataset).resolve()),
+        "device": args.device, "device_name": _device_name(args.device),
+        "threads": args.threads, "steps": int(trainer.step),
+        "fit_s": round(float(trainer.elapsed), 1), "fit_wall_s": round(fit_wall, 1),
+        "inv_s": round(float(field.inv_s().detach()), 1),
+        "fit_peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
+    }
+    with atomic_path(run_dir / "fit.json") as tmp:
+        tmp.write_text(json.dumps(info, indent=1))
+    return run_dir
+
+
+def _device_name(device: str) -> str:
+    import torch
+
+    if device.startswith("cuda") and torch.cuda.is_available():
+        return torch.cuda.get_device_name(torch.device(device))
+    return f"{os.cpu_count()} cpus"
+
+
+def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = None) -> dict:
+    """Score a run folder made by :func:`fit_run`: the CD curve, the final field's metrics.
+
+    ``cache``: where to look for the dataset (by folder name) when the path recorded in
+    ``fit.json`` does not exist here (a fit made on another machine).
+    """
+    import torch
+
+    from hybridneus.config import load_config
+    from hybridneus.data import load_dataset
+    from hybridneus.evaluation.geometry import sdf_mae
+    from hybridneus.meshing.convert import load_mesh, save_mesh
+    from hybridneus.training.runs import build_field
+
+    info = json.loads((run_dir / "fit.json").read_text())
+    dataset = Path(info["dataset"])
+    if not (dataset / "gt_mesh.ply").is_file() and cache is not None:
+        dataset = cache / dataset.name
+    if not (dataset / "gt_mesh.ply").is_file():
+        raise SystemExit(f"{run_dir / 'fit.json'}: dataset {dataset.name} not found here")
     cfg = load_config(run_dir / "config.yaml")
-    state = load_checkpoint(run_dir)
-    field = field.to("cpu").eval()
-    gt = load_mesh(Path(args.dataset) / "gt_mesh.ply")
+    gt = load_mesh(dataset / "gt_mesh.ply")
+    snaps = sorted((run_dir / "snapshots").glob("t*.pt"),
+                   key=lambda p: float(p.name[1:].split("-")[0]))
+    if not snaps:
+        raise SystemExit(f"{run_dir}: no snapshots/ to score")
+
+    def load(path: Path):
+        snap = torch.load(path, map_location="cpu", weights_only=True)
+        f = build_field(cfg, snap["scene"])
+        f.load_state_dict(snap["model"])
+        f.update_step(int(snap["step"]), int(snap["total_steps"]))
+        return f.eval(), snap
+
     # The untrained field (same seed, same construction as the trainer's) starts the curve.
     torch.manual_seed(cfg.train.seed)
-    initial, _ = _score_field(build_field(cfg, state["scene"]).eval(), gt, args.res)
+    first = torch.load(snaps[0], map_location="cpu", weights_only=True)
+    initial, _ = _score_field(build_field(cfg, first["scene"]).eval(), gt, res)
     curve = [[0.0, 0, initial["chamfer"]]]
-    for path in snapshots:
-        snap = torch.load(path, map_location="cpu", weights_only=True)
-        f = build_field(cfg, state["scene"])
-        f.load_state_dict(snap["model"])
-        f.update_step(int(snap["step"]), int(state["total_steps"]))
-        score, _ = _score_field(f.eval(), gt, args.res)
+    for path in snaps[:-1]:
+        f, snap = load(path)
+        score, _ = _score_field(f, gt, res)
         curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), score["chamfer"]])
-    final, mesh = _score_field(field, gt, args.res)
-    curve.append([round(float(state["elapsed"]), 1), int(state["step"]), final["chamfer"]])
-    report = {
-        "scene": args.scene, "preset": args.preset, "minutes": args.minutes,
-        "noise": args.noise, "dataset": str(args.dataset), "run": str(run_dir),
-        "device": args.device, "threads": args.threads, "res": args.res,
-        "steps": int(state["step"]), "fit_s": round(float(state["elapsed"]), 1),
-        "fit_wall_s": round(fit_wall, 1), "inv_s": round(float(field.inv_s().detach()), 1),
-        **final, "curve": curve,
-    }
+    field, snap = load(snaps[-1])
+    final, mesh = _score_field(field, gt, res)
+    curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), final["chamfer"]])
+    report = {**info, "run": str(run_dir), "res": res, **final, "curve": curve}
     if mesh is not None and len(mesh.faces):
         save_mesh(mesh, run_dir / "mesh.ply")
         report["sdf_mae"] = float(sdf_mae(mesh, gt).mae)
-        report.update(_image_metrics(field, load_dataset(args.dataset), args.image_views))
-    # Fitting alone, then fitting and scoring (rendering test views with normals is the
-    # larger of the two for deep MLPs).
-    report["fit_peak_rss_mb"] = round(fit_rss)
+        report.update(_image_metrics(field, load_dataset(dataset), image_views))
+    # Fitting alone (fit_peak_rss_mb, from fit.json), then fitting and scoring (rendering test
+    # views with normals is the larger of the two for deep MLPs).
     report["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
     return report
 
@@ -219,42 +284,58 @@ def _git_commit() -> str:
 def launch(
     args, scene: str, dataset: Path, spec: str, noise: tuple[float, float]
 ) -> dict | None:
-    """Run one fit in a child process and append its JSON line to ``args.out``.
+    """Run one fit (and, unless ``--fit-only``, its scoring) in a child process.
 
-    A failed fit is reported on stderr and skipped (None), so one scene cannot stop a suite.
+    A scored fit is appended to ``args.out``. A failed fit is reported on stderr and skipped
+    (None), so one scene cannot stop a suite.
     """
     cmd = [sys.executable, str(Path(__file__).resolve()), "_job", "--scene", scene,
            "--dataset", str(dataset), "--preset", spec, "--minutes", str(args.minutes),
            "--threads", str(args.threads), "--device", args.device, "--res", str(args.res),
            "--curve", str(args.curve), "--image-views", str(args.image_views),
            "--out-runs", str(args.out_runs), "--noise", json.dumps(list(noise))]
-    print(f"[suite] {scene} {spec} {args.minutes:g} min noise={noise}", file=sys.stderr,
-          flush=True)
+    if args.fit_only:
+        cmd.append("--fit-only")
+    for override in args.overrides:
+        cmd += ["--set", override]
+    print(f"[suite] {scene} {spec} {args.minutes:g} min noise={noise} on {args.device}",
+          file=sys.stderr, flush=True)
     proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
     if proc.returncode != 0:
         print(f"[suite] {scene} {spec}: the fit failed (exit {proc.returncode}); skipped",
               file=sys.stderr, flush=True)
         return None
     report = json.loads(proc.stdout.strip().splitlines()[-1])
+    if args.fit_only:
+        print(f"[suite] {scene} {spec}: {report['steps']} steps, run {report['run']}",
+              file=sys.stderr, flush=True)
+        return report
+    return record(args, report)
+
+
+def record(args, report: dict) -> dict:
+    """Append a scored fit to the results file (with date and commit) and say its CD."""
     report.update(date=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-                  commit=_git_commit(), machine=f"{os.cpu_count()} cpus")
+                  commit=_git_commit())
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with open(args.out, "a") as fh:
         fh.write(json.dumps(report) + "\n")
     cd = report.get("chamfer")
-    print(f"[suite] {scene} {spec}: CD {cd if cd is None else round(cd, 4)} "
-          f"in {report['steps']} steps", file=sys.stderr, flush=True)
+    print(f"[suite] {report['scene']} {report['preset']} on {report['device']}: CD "
+          f"{cd if cd is None else round(cd, 4)} in {report['steps']} steps",
+          file=sys.stderr, flush=True)
     return report
 
 
 def read_results(path: Path) -> list[dict]:
-    """The latest line per (scene, preset, minutes, noise) of a results file."""
+    """The latest line per (scene, preset, minutes, noise, device) of a results file."""
     latest: dict[tuple, dict] = {}
     if path.is_file():
         for line in path.read_text().splitlines():
             if line.strip():
                 r = json.loads(line)
-                latest[(r["scene"], r["preset"], r["minutes"], tuple(r["noise"]))] = r
+                key = (r["scene"], r["preset"], r["minutes"], tuple(r["noise"]), r["device"])
+                latest[key] = r
     return list(latest.values())
 
 
@@ -265,28 +346,30 @@ def _fmt(v, digits: int = 4) -> str:
 def report_tables(results: list[dict]) -> str:
     """Markdown: one table of all fits, means per preset, and the issue's three ratios."""
     clean = [r for r in results if tuple(r["noise"]) == (0.0, 0.0)]
-    lines = ["| scene | preset | min | steps | CD | acc | comp | F@1% | SDF-MAE | PSNR | SSIM |"
-             " mesh s | peak RSS MB (fit) |", "|" + "---|" * 13]
-    for r in sorted(clean, key=lambda r: (r["scene"], r["minutes"], r["preset"])):
+    lines = ["| scene | preset | device | min | steps | CD | acc | comp | F@1% | SDF-MAE | PSNR |"
+             " SSIM | mesh s | peak RSS MB (fit) |", "|" + "---|" * 14]
+    for r in sorted(clean, key=lambda r: (r["scene"], r["device"], r["minutes"], r["preset"])):
         lines.append(
-            f"| {r['scene']} | {r['preset']} | {r['minutes']:g} | {r['steps']} | "
+            f"| {r['scene']} | {r['preset']} | {r['device']} | {r['minutes']:g} | {r['steps']} | "
             f"{_fmt(r.get('chamfer'))} | {_fmt(r.get('accuracy'))} | "
             f"{_fmt(r.get('completeness'))} | {_fmt(r.get('fscore'), 3)} | "
             f"{_fmt(r.get('sdf_mae'))} | {_fmt(r.get('psnr'), 2)} | {_fmt(r.get('ssim'), 3)} | "
             f"{_fmt(r.get('mesh_s'), 1)} | {r.get('fit_peak_rss_mb', '-')} |")
-    lines += ["", "| preset | min | scenes | mean CD |", "|---|---|---|---|"]
+    lines += ["", "| preset | device | min | scenes | mean CD |", "|---|---|---|---|---|"]
     groups: dict[tuple, list[float]] = {}
     for r in clean:
         if r.get("chamfer") is not None:
-            groups.setdefault((r["preset"], r["minutes"]), []).append(r["chamfer"])
-    for (preset, minutes), cds in sorted(groups.items()):
-        lines.append(f"| {preset} | {minutes:g} | {len(cds)} | {np.mean(cds):.4f} |")
-    lines += ["", "| scene | min | CD events / CD rgb (goal <= 1.3) | time for the hybrid to "
-              "reach the eventneus CD / eventneus time (goal <= 0.1) |", "|---|---|---|---|"]
-    by = {(r["scene"], r["minutes"], r["preset"]): r for r in clean}
-    for scene, minutes in sorted({(r["scene"], r["minutes"]) for r in clean}):
-        ev, rgb = by.get((scene, minutes, "fast")), by.get((scene, minutes, "fast-rgb"))
-        deep = by.get((scene, minutes, "eventneus"))
+            groups.setdefault((r["preset"], r["device"], r["minutes"]), []).append(r["chamfer"])
+    for (preset, device, minutes), cds in sorted(groups.items()):
+        lines.append(f"| {preset} | {device} | {minutes:g} | {len(cds)} | {np.mean(cds):.4f} |")
+    lines += ["", "| scene | device | min | CD events / CD rgb (goal <= 1.3) | time for the "
+              "hybrid to reach the eventneus CD / eventneus time (goal <= 0.1) |",
+              "|---|---|---|---|---|"]
+    by = {(r["scene"], r["device"], r["minutes"], r["preset"]): r for r in clean}
+    for scene, device, minutes in sorted({(r["scene"], r["device"], r["minutes"]) for r in clean}):
+        ev = by.get((scene, device, minutes, "fast"))
+        rgb = by.get((scene, device, minutes, "fast-rgb"))
+        deep = by.get((scene, device, minutes, "eventneus"))
         ratio = "-"
         if ev and rgb and ev.get("chamfer") and rgb.get("chamfer"):
             ratio = f"{ev['chamfer'] / rgb['chamfer']:.2f}"
@@ -294,14 +377,15 @@ def report_tables(results: list[dict]) -> str:
         if ev and deep and deep.get("chamfer") is not None:
             hits = [t for t, _, cd in ev["curve"] if cd is not None and cd <= deep["chamfer"]]
             reach = f"{min(hits) / deep['fit_s']:.3f}" if hits else "not reached"
-        lines.append(f"| {scene} | {minutes:g} | {ratio} | {reach} |")
+        lines.append(f"| {scene} | {device} | {minutes:g} | {ratio} | {reach} |")
     noisy = [r for r in results if tuple(r["noise"]) != (0.0, 0.0)]
     if noisy:
         lines += ["", "Noise sweep:", "",
                   "| scene | preset | min | threshold sigma | background rate | CD |",
                   "|---|---|---|---|---|---|"]
         base = [r for r in clean if any(n["scene"] == r["scene"] and n["preset"] == r["preset"]
-                                        and n["minutes"] == r["minutes"] for n in noisy)]
+                                        and n["minutes"] == r["minutes"]
+                                        and n["device"] == r["device"] for n in noisy)]
         for r in sorted(base + noisy, key=lambda r: (r["scene"], r["preset"], r["noise"])):
             lines.append(f"| {r['scene']} | {r['preset']} | {r['minutes']:g} | "
                          f"{r['noise'][0]:g} | {r['noise'][1]:g} | {_fmt(r.get('chamfer'))} |")
@@ -340,7 +424,7 @@ def _plot_scene(scene: str, runs: list[dict]) -> np.ndarray:
         for p in poly:
             cv2.circle(img, p, 3, colour, -1, cv2.LINE_AA)
         cv2.polylines(img, [np.array(poly, np.int32)], False, colour, 1, cv2.LINE_AA)
-        label = f"{r['preset']} ({r['minutes']:g} min)"
+        label = f"{r['preset']} {r['device']} ({r['minutes']:g} min)"
         cv2.putText(img, label, (w - pad - 170, pad + 16 + 16 * k), font, 0.45, colour, 1,
                     cv2.LINE_AA)
     cv2.putText(img, f"{scene}: Chamfer (log) vs fit seconds (0 to {t1:.0f} s)",
@@ -378,7 +462,15 @@ def main() -> None:
             ap.add_argument(name, type=kind, required=True)
         ap.add_argument("--out-runs", type=Path, required=True)
         ap.add_argument("--noise", type=json.loads, required=True)
-        print(json.dumps(run_job(ap.parse_args(sys.argv[2:]))))
+        ap.add_argument("--fit-only", action="store_true")
+        ap.add_argument("--set", dest="overrides", action="append", default=[])
+        job = ap.parse_args(sys.argv[2:])
+        run_dir = fit_run(job)
+        if job.fit_only:
+            report = {**json.loads((run_dir / "fit.json").read_text()), "run": str(run_dir)}
+        else:
+            report = score_run(run_dir, job.res, job.image_views)
+        print(json.dumps(report))
         return
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
@@ -407,17 +499,25 @@ def main() -> None:
     ap.add_argument("--noise-levels", nargs="+", metavar="SIGMA:RATE",
                     help="noise levels of the sweep, threshold sigma : background rate "
                     "(default: every level of NOISE_LEVELS)")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override for every fit (the results name the preset with it)")
     ap.add_argument("--report", action="store_true", help="only print tables, write plots")
+    ap.add_argument("--fit-only", action="store_true",
+                    help="fit and keep each run's snapshots/ and fit.json, score nothing (for a "
+                    "machine without the meshing libraries; score them later with --score-runs)")
+    ap.add_argument("--score-runs", nargs="+", type=Path, metavar="RUN",
+                    help="score run folders made with --fit-only (datasets looked up in --cache "
+                    "by name) and append them to the results")
     args = ap.parse_args()
 
-    if not args.report:
-        scenes = find_scenes(args.assets)
-        if not scenes:
-            raise SystemExit(f"{args.assets}: no asset folder with a mesh")
+    if args.score_runs:
+        for run_dir in args.score_runs:
+            record(args, score_run(run_dir, args.res, args.image_views, args.cache))
+    elif not args.report:
+        scenes = find_scenes(args.assets) if args.assets.is_dir() else {}
         wanted = [args.noise_sweep] if args.noise_sweep else (args.scenes or list(scenes))
-        missing = [s for s in wanted if s not in scenes]
-        if missing:
-            raise SystemExit(f"{args.assets}: no asset {missing[0]!r}; found {sorted(scenes)}")
+        if not wanted:
+            raise SystemExit(f"{args.assets}: no asset folder with a mesh")
         levels: tuple[tuple[float, float], ...] = ((0.0, 0.0),)
         if args.noise_sweep:
             levels = NOISE_LEVELS
@@ -426,9 +526,11 @@ def main() -> None:
         specs = args.presets[:1] if args.noise_sweep else args.presets
         for scene in wanted:
             for noise in levels:
-                data = dataset_for(scene, scenes[scene], args, noise)
+                data = dataset_for(scene, scenes.get(scene), args, noise)
                 for spec in specs:
                     launch(args, scene, data, spec, noise)
+    if args.fit_only:
+        return
     results = read_results(args.out)
     print(report_tables(results))
     for path in plot_curves(results, args.plots):

@@ -119,6 +119,36 @@ def test_short_fit_pulls_the_zero_level_onto_the_true_surface(scene):
     assert after < 0.5 * before, (before, after)
 
 
+def test_curvature_term_sits_on_the_rendered_surface(scene):
+    """loss.lambda_curvature acts at the expected-depth points of rays that hit the surface."""
+    from hybridneus.rendering.renderer import render_rays
+
+    trainer, _ = prepare(scene, tiny("train.iters=1", "loss.lambda_curvature=0.1"), device="cpu")
+    batch = trainer.windows.sample(64)
+    o = torch.cat([batch.origins0, batch.origins1])
+    d = torch.cat([batch.dirs0, batch.dirs1])
+    out = render_rays(trainer.field, o, d, trainer.sampler, None, False)
+    points = trainer._surface_points(out, o, d)
+    hits = int((out.opacity > 0.5).sum())
+    assert 0 < hits < len(o) and points.shape == (hits, 3)
+    with torch.no_grad():
+        # Expected depth without dividing by the opacity would fall up to half the camera
+        # distance short of the surface.
+        assert float(trainer.field.sdf(points).abs().max()) < 0.05
+    logs = trainer.train_step()
+    assert "loss/curvature" in logs and np.isfinite(logs["loss/curvature"])
+    off = prepare(scene, tiny("train.iters=1"), device="cpu")[0].train_step()
+    assert "loss/curvature" not in off
+
+
+def test_curvature_loss_is_zero_for_equal_normals_and_grows_with_their_angle():
+    g = torch.nn.functional.normalize(torch.randn(100, 3), dim=-1)
+    assert float(L.curvature_loss(g, 3.0 * g)) == pytest.approx(0.0, abs=1e-10)
+    tilted = g + 0.1 * torch.nn.functional.normalize(torch.randn(100, 3), dim=-1)
+    more = g + 0.5 * torch.nn.functional.normalize(torch.randn(100, 3), dim=-1)
+    assert 0 < float(L.curvature_loss(g, tilted)) < float(L.curvature_loss(g, more))
+
+
 @pytest.mark.slow
 def test_fit_moves_the_zero_level_towards_the_true_surface(tmp_path_factory):
     """400 steps on a 64x48, 80-view scene beat the initial sphere's Chamfer (issue criterion)."""
