@@ -99,6 +99,9 @@ def main() -> None:
         sync()
 
     def full_step():
+        # train_step applies the schedules: keep them at their late, all-levels end, on a step
+        # without the occupancy refresh (every render.occupancy_every steps; not included).
+        trainer.step, trainer.total_steps = 10**6 + 1, 10**6 + 2
         trainer.train_step()
         sync()
 
@@ -112,8 +115,14 @@ def main() -> None:
         ("Adam step", optimiser),
         ("full train_step", full_step),
     ]:
+        if fn is optimiser:
+            # Adam skips parameters without gradients: give every one a dense gradient, as a
+            # real backward pass does.
+            for p in field.parameters():
+                p.grad = torch.zeros_like(p)
         _timed(fn, args.warmup)
-        trainer.optimizer.zero_grad(set_to_none=True)
+        if fn is not optimiser:
+            trainer.optimizer.zero_grad(set_to_none=True)
         rows.append((name, _timed(fn, args.steps)))
         trainer.optimizer.zero_grad(set_to_none=True)
     print(f"device {trainer.device}, threads {torch.get_num_threads()}, preset {args.preset}, "

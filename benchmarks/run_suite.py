@@ -381,13 +381,13 @@ def report_tables(results: list[dict]) -> str:
     noisy = [r for r in results if tuple(r["noise"]) != (0.0, 0.0)]
     if noisy:
         lines += ["", "Noise sweep:", "",
-                  "| scene | preset | min | threshold sigma | background rate | CD |",
-                  "|---|---|---|---|---|---|"]
+                  "| scene | preset | device | min | threshold sigma | background rate | CD |",
+                  "|---|---|---|---|---|---|---|"]
         base = [r for r in clean if any(n["scene"] == r["scene"] and n["preset"] == r["preset"]
                                         and n["minutes"] == r["minutes"]
                                         and n["device"] == r["device"] for n in noisy)]
         for r in sorted(base + noisy, key=lambda r: (r["scene"], r["preset"], r["noise"])):
-            lines.append(f"| {r['scene']} | {r['preset']} | {r['minutes']:g} | "
+            lines.append(f"| {r['scene']} | {r['preset']} | {r['device']} | {r['minutes']:g} | "
                          f"{r['noise'][0]:g} | {r['noise'][1]:g} | {_fmt(r.get('chamfer'))} |")
     return "\n".join(lines)
 

@@ -1,4 +1,4 @@
-"""The benchmark suite's fit-here / score-there path and its results file (benchmarks/run_suite.py)."""
+"""benchmarks/run_suite.py: fitting on one machine, scoring on another; its results file."""
 
 from __future__ import annotations
 
