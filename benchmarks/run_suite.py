@@ -68,6 +68,14 @@ def find_scenes(assets: Path) -> dict[str, Path]:
     return scenes
 
 
+def dataset_folder(scene: str, args, noise: tuple[float, float]) -> Path:
+    """Where the suite caches the dataset of ``scene`` at its size and noise level."""
+    tag = f"{scene}-{args.views}v-{args.width}x{args.height}-t{args.test_views}"
+    if noise != (0.0, 0.0):
+        tag += f"-noise{noise[0]:g}-{noise[1]:g}"
+    return args.cache / tag
+
+
 def dataset_for(scene: str, mesh: Path | None, args, noise: tuple[float, float]) -> Path:
     """Simulate (once) and return the dataset folder of ``scene`` at the suite's size.
 
@@ -76,13 +84,8 @@ def dataset_for(scene: str, mesh: Path | None, args, noise: tuple[float, float])
     """
     from hybridneus.simulate import NoiseConfig, SimulationConfig, simulate_dataset
 
-    tag = f"{scene}-{args.views}v-{args.width}x{args.height}-t{args.test_views}"
-    if noise != (0.0, 0.0):
-        tag += f"-noise{noise[0]:g}-{noise[1]:g}"
-    folder = args.cache / tag
+    folder = dataset_folder(scene, args, noise)
     if not (folder / "scene.json").is_file():
-        if mesh is None:
-            raise SystemExit(f"{args.assets}: no asset {scene!r} and no {folder} to fit")
         print(f"[suite] simulating {folder}", file=sys.stderr, flush=True)
         cfg = SimulationConfig(
             n_views=args.views, width=args.width, height=args.height, revolutions=8.0,
@@ -530,6 +533,14 @@ def main() -> None:
             if args.noise_levels:
                 levels = tuple(tuple(float(v) for v in lv.split(":")) for lv in args.noise_levels)
         specs = args.presets[:1] if args.noise_sweep else args.presets
+        # Before any fit: a scene that can be neither simulated nor found in the cache would
+        # otherwise stop the suite only when its turn comes, hours in.
+        for scene in wanted:
+            for noise in levels:
+                folder = dataset_folder(scene, args, noise)
+                if scene not in scenes and not (folder / "scene.json").is_file():
+                    raise SystemExit(f"{args.assets}: no asset {scene!r} (found {sorted(scenes)})"
+                                     f" and no cached {folder}")
         for scene in wanted:
             for noise in levels:
                 data = dataset_for(scene, scenes.get(scene), args, noise)

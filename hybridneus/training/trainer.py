@@ -212,8 +212,9 @@ class Trainer:
         depth = out.depth.detach()[hit] / out.opacity.detach()[hit]
         return origins[hit] + depth[:, None] * dirs[hit]
 
-    def _curvature(self, points: torch.Tensor, grads: list[torch.Tensor]) -> torch.Tensor:
-        """Normal change over ``loss.curvature_step`` at surface ``points`` (grads gets theirs).
+    def _curvature(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normal change over ``loss.curvature_step`` at surface ``points``, and the SDF
+        gradients it evaluated (at the points and their shifted copies, for the Eikonal term).
 
         Where the events say nothing (a flat face of one colour is seen only at its outline)
         the data leave the surface free to wrinkle; this prior prefers the smooth one.
@@ -222,9 +223,8 @@ class Trainer:
         offset = torch.randn(points.shape, generator=self.generator, device=self.device)
         shifted = points + lw.curvature_step * torch.nn.functional.normalize(offset, dim=-1)
         _, grad, _ = self.field.sdf_gradient_features(torch.cat([points, shifted]), True)
-        grads.append(grad)
         grad_p, grad_s = grad.chunk(2)
-        return L.curvature_loss(grad_p, grad_s)
+        return L.curvature_loss(grad_p, grad_s), grad
 
     def train_step(self) -> dict[str, float]:
         """Run one optimisation step; return the logged scalars."""
@@ -263,7 +263,8 @@ class Trainer:
         if lw.lambda_curvature > 0:
             surface = self._surface_points(out, origins, dirs)
             if surface.shape[0] > 0:
-                terms["curvature"] = self._curvature(surface, grads)
+                terms["curvature"], grad_c = self._curvature(surface)
+                grads.append(grad_c)
         if need_random:
             pts = self._random_points(lw.n_random_points)
             sdf_r, grad_r, _ = self.field.sdf_gradient_features(pts, create_graph=True)
