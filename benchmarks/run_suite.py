@@ -229,6 +229,9 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     from hybridneus.meshing.convert import load_mesh, save_mesh
     from hybridneus.training.runs import build_field
 
+    for name in ("fit.json", "config.yaml"):
+        if not (run_dir / name).is_file():
+            raise SystemExit(f"{run_dir / name}: missing (not a run folder made by the suite)")
     info = json.loads((run_dir / "fit.json").read_text())
     dataset = Path(info["dataset"])
     if not (dataset / "gt_mesh.ply").is_file() and cache is not None:
