@@ -149,6 +149,45 @@ def test_curvature_loss_is_zero_for_equal_normals_and_grows_with_their_angle():
     assert 0 < float(L.curvature_loss(g, tilted)) < float(L.curvature_loss(g, more))
 
 
+def test_background_matter_loss_weighs_opacity_by_colour_match_only():
+    bg = torch.tensor([0.6, 0.6, 0.6])
+    # Foreground colours: the background itself, slightly off, far off.
+    fg = torch.tensor([[0.6, 0.6, 0.6], [0.65, 0.6, 0.55], [0.1, 0.9, 0.2]])
+    opacity = torch.tensor([0.8, 0.8, 0.8], requires_grad=True)
+    color = (opacity[:, None] * fg + (1 - opacity[:, None]) * bg).detach().requires_grad_()
+    loss = L.background_matter_loss(color, opacity, bg, sigma=0.1)
+    loss.backward()
+    g = opacity.grad.numpy() * 3  # per-ray weight = d loss / d opacity_i times n_rays
+    assert g[0] == pytest.approx(1.0, abs=1e-5)
+    assert g[1] == pytest.approx(np.exp(-0.25), abs=1e-4)
+    assert g[2] < 1e-10
+    assert color.grad is None  # never pushes a colour away from the background
+
+
+def test_background_matter_term_thins_matter_in_training(scene):
+    """With only this term (a colour width that matches everything) opacity falls."""
+    from hybridneus.rendering.renderer import render_rays
+
+    only = tiny(
+        "train.iters=30", "loss.lambda_event=0", "loss.lambda_eikonal=0",
+        "loss.lambda_background_matter=1", "loss.background_matter_sigma=100",
+    )
+    trainer, _ = prepare(scene, only, device="cpu")
+    batch = trainer.windows.sample(128)
+
+    def mean_opacity():
+        out = render_rays(trainer.field, batch.origins1, batch.dirs1, trainer.sampler, None, False)
+        return float(out.opacity.mean())
+
+    before = mean_opacity()
+    for _ in range(30):
+        logs = trainer.train_step()
+    assert "loss/background_matter" in logs
+    assert mean_opacity() < 0.8 * before
+    off = prepare(scene, tiny("train.iters=1"), device="cpu")[0].train_step()
+    assert "loss/background_matter" not in off
+
+
 @pytest.mark.slow
 def test_fit_moves_the_zero_level_towards_the_true_surface(tmp_path_factory):
     """400 steps on a 64x48, 80-view scene beat the initial sphere's Chamfer (issue criterion)."""

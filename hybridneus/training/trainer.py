@@ -256,6 +256,10 @@ class Trainer:
             )
         else:
             terms["rgb"] = L.rgb_loss(out.color, frame_batch.color)
+        if lw.lambda_background_matter > 0:
+            terms["background_matter"] = L.background_matter_loss(
+                out.color, out.opacity, self.field.background(), lw.background_matter_sigma
+            )
         need_random = lw.n_random_points > 0 and (
             lw.lambda_eikonal > 0 or lw.lambda_sparsity > 0 or lw.lambda_outside > 0
         )
