@@ -128,7 +128,7 @@ def test_curvature_term_sits_on_the_rendered_surface(scene):
     o = torch.cat([batch.origins0, batch.origins1])
     d = torch.cat([batch.dirs0, batch.dirs1])
     out = render_rays(trainer.field, o, d, trainer.sampler, None, False)
-    points = trainer._surface_points(out, o, d)
+    points, hit = trainer._surface_points(out, o, d)
     hits = int((out.opacity > 0.5).sum())
     assert 0 < hits < len(o) and points.shape == (hits, 3)
     with torch.no_grad():
@@ -149,23 +149,29 @@ def test_curvature_loss_is_zero_for_equal_normals_and_grows_with_their_angle():
     assert 0 < float(L.curvature_loss(g, tilted)) < float(L.curvature_loss(g, more))
 
 
-def test_background_matter_loss_weighs_opacity_by_colour_match_only():
+def test_background_match_compares_the_foreground_colour_with_the_background():
     bg = torch.tensor([0.6, 0.6, 0.6])
     # Foreground colours: the background itself, slightly off, far off.
     fg = torch.tensor([[0.6, 0.6, 0.6], [0.65, 0.6, 0.55], [0.1, 0.9, 0.2]])
     opacity = torch.tensor([0.8, 0.8, 0.8], requires_grad=True)
     color = (opacity[:, None] * fg + (1 - opacity[:, None]) * bg).detach().requires_grad_()
-    loss = L.background_matter_loss(color, opacity, bg, sigma=0.1)
+    m = L.background_match(color, opacity, bg, sigma=0.1)
+    assert not m.requires_grad  # never pushes a colour away from the background
+    assert m.numpy() == pytest.approx([1.0, np.exp(-0.25), 0.0], abs=1e-4)
+
+
+def test_background_matter_loss_pushes_only_negative_sdf_of_matching_rays():
+    sdf = torch.tensor([-0.02, -0.02, 0.03], requires_grad=True)
+    match = torch.tensor([1.0, 0.0, 1.0])
+    loss = L.background_matter_loss(sdf, match)
+    assert float(loss) == pytest.approx(0.02 / 3)
     loss.backward()
-    g = opacity.grad.numpy() * 3  # per-ray weight = d loss / d opacity_i times n_rays
-    assert g[0] == pytest.approx(1.0, abs=1e-5)
-    assert g[1] == pytest.approx(np.exp(-0.25), abs=1e-4)
-    assert g[2] < 1e-10
-    assert color.grad is None  # never pushes a colour away from the background
+    assert sdf.grad.numpy() == pytest.approx([-1 / 3, 0.0, 0.0])
+    assert float(L.background_matter_loss(torch.zeros(0), torch.zeros(0))) == 0.0
 
 
-def test_background_matter_term_thins_matter_in_training(scene):
-    """With only this term (a colour width that matches everything) opacity falls."""
+def test_background_matter_term_carves_behind_the_surface_in_training(scene):
+    """With only this term (a colour width that matches everything) the surface recedes."""
     from hybridneus.rendering.renderer import render_rays
 
     only = tiny(
@@ -175,15 +181,16 @@ def test_background_matter_term_thins_matter_in_training(scene):
     trainer, _ = prepare(scene, only, device="cpu")
     batch = trainer.windows.sample(128)
 
-    def mean_opacity():
-        out = render_rays(trainer.field, batch.origins1, batch.dirs1, trainer.sampler, None, False)
-        return float(out.opacity.mean())
+    def render():
+        return render_rays(trainer.field, batch.origins1, batch.dirs1, trainer.sampler, None, False)
 
-    before = mean_opacity()
+    out = render()
+    points, hit = trainer._surface_points(out, batch.origins1, batch.dirs1, 0.01)
+    assert int(hit.sum()) > 10 and float(trainer.field.sdf(points).mean()) < 0  # inside
     for _ in range(30):
         logs = trainer.train_step()
     assert "loss/background_matter" in logs
-    assert mean_opacity() < 0.8 * before
+    assert float(render().opacity.mean()) < 0.5 * float(out.opacity.mean())
     off = prepare(scene, tiny("train.iters=1"), device="cpu")[0].train_step()
     assert "loss/background_matter" not in off
 
