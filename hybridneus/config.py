@@ -88,9 +88,8 @@ class LossConfig:
     lambda_sparsity: float = 0.0  # exp(-tau |sdf|) on random points in the crop (anti-floater)
     lambda_outside: float = 1.0  # relu(-sdf) at random points outside the crop (no caps there)
     sparsity_tau: float = 50.0  # decay of the sparsity term (1/world units)
-    lambda_background_matter: float = 0.0  # carve matter that looks like the background
+    lambda_background_matter: float = 0.0  # thin matter that looks like the background
     background_matter_sigma: float = 0.1  # colour distance at which that term fades (exp(-(d/s)^2))
-    background_matter_depth: float = 0.01  # how far behind the surface it pushes the SDF positive
     n_random_points: int = 1024  # random volume points per step for Eikonal/regularisers
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
     curvature_step: float = 0.01  # finite-difference step of the curvature term (world units)

@@ -76,6 +76,14 @@ def test_config_table_lists_every_key():
     assert all(r[3] for r in rows if r[0] != "preset"), "every key has a comment"
 
 
+def test_docs_table_lists_every_key():
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "docs" / "training.md").read_text()
+    missing = [key for key, *_ in config_table() if f"| `{key}` |" not in text]
+    assert not missing, f"docs/training.md lacks rows for {missing}"
+
+
 def test_cli_bad_config_exits_2_with_one_line(tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "hybridneus.cli.app", "fit", str(tmp_path), "--set",

@@ -128,7 +128,7 @@ def test_curvature_term_sits_on_the_rendered_surface(scene):
     o = torch.cat([batch.origins0, batch.origins1])
     d = torch.cat([batch.dirs0, batch.dirs1])
     out = render_rays(trainer.field, o, d, trainer.sampler, None, False)
-    points, hit = trainer._surface_points(out, o, d)
+    points = trainer._surface_points(out, o, d)
     hits = int((out.opacity > 0.5).sum())
     assert 0 < hits < len(o) and points.shape == (hits, 3)
     with torch.no_grad():
@@ -160,18 +160,9 @@ def test_background_match_compares_the_foreground_colour_with_the_background():
     assert m.numpy() == pytest.approx([1.0, np.exp(-0.25), 0.0], abs=1e-4)
 
 
-def test_background_matter_loss_pushes_only_negative_sdf_of_matching_rays():
-    sdf = torch.tensor([-0.02, -0.02, 0.03], requires_grad=True)
-    match = torch.tensor([1.0, 0.0, 1.0])
-    loss = L.background_matter_loss(sdf, match)
-    assert float(loss) == pytest.approx(0.02 / 3)
-    loss.backward()
-    assert sdf.grad.numpy() == pytest.approx([-1 / 3, 0.0, 0.0])
-    assert float(L.background_matter_loss(torch.zeros(0), torch.zeros(0))) == 0.0
-
-
-def test_background_matter_term_carves_behind_the_surface_in_training(scene):
-    """With only this term (a colour width that matches everything) the surface recedes."""
+def test_background_matter_term_thins_matter_without_blurring_it(scene):
+    """With only this term (a colour width that matches everything) opacity falls, and the
+    NeuS sharpness gets no gradient from it (blurring would be the cheap way to lower opacity)."""
     from hybridneus.rendering.renderer import render_rays
 
     only = tiny(
@@ -184,15 +175,30 @@ def test_background_matter_term_carves_behind_the_surface_in_training(scene):
     def render():
         return render_rays(trainer.field, batch.origins1, batch.dirs1, trainer.sampler, None, False)
 
-    out = render()
-    points, hit = trainer._surface_points(out, batch.origins1, batch.dirs1, 0.01)
-    assert int(hit.sum()) > 10 and float(trainer.field.sdf(points).mean()) < 0  # inside
+    before, inv_s = float(render().opacity.mean()), float(trainer.field.inv_s())
     for _ in range(30):
         logs = trainer.train_step()
     assert "loss/background_matter" in logs
-    assert float(render().opacity.mean()) < 0.5 * float(out.opacity.mean())
+    assert float(render().opacity.mean()) < 0.8 * before
+    assert float(trainer.field.inv_s()) == pytest.approx(inv_s)
     off = prepare(scene, tiny("train.iters=1"), device="cpu")[0].train_step()
     assert "loss/background_matter" not in off
+
+
+def test_fixed_s_opacity_equals_the_opacity_and_sends_no_gradient_to_the_sharpness(scene):
+    from hybridneus.rendering.renderer import render_rays
+
+    trainer, _ = prepare(scene, tiny("train.iters=1"), device="cpu")
+    batch = trainer.windows.sample(64)
+    out = render_rays(trainer.field, batch.origins1, batch.dirs1, trainer.sampler, None, True,
+                      fixed_s_opacity=True)
+    assert torch.allclose(out.opacity_fixed_s, out.opacity)
+    variance = [p for n, p in trainer.field.named_parameters() if "variance" in n]
+    assert len(variance) == 1
+    grad = torch.autograd.grad(out.opacity_fixed_s.sum(), variance, allow_unused=True)[0]
+    assert grad is None or float(grad.abs().sum()) == 0.0
+    assert render_rays(trainer.field, batch.origins1, batch.dirs1, trainer.sampler, None,
+                       True).opacity_fixed_s is None
 
 
 @pytest.mark.slow

@@ -183,30 +183,29 @@ def background_match(
     return torch.exp(-(((fg - bg).abs().amax(dim=-1) / sigma) ** 2))
 
 
-def background_matter_loss(sdf_behind: torch.Tensor, match: torch.Tensor) -> torch.Tensor:
-    """Mean of ``match * relu(-sdf)`` just behind the rendered surface of rays that hit one.
+
+def background_matter_loss(opacity: torch.Tensor, match: torch.Tensor) -> torch.Tensor:
+    """Mean of ``match * opacity`` over rays: thins matter that looks like the background.
 
     Matter coloured like the constant background fires no events where it meets the
     background, so the event loss is the same with or without it: an unseen underside gets
     filled with background-coloured material down to the crop. Of two explanations of the data
-    this prefers the emptier one, by pushing the SDF positive a little way behind surfaces that
-    look like the background (:func:`background_match`). Its silhouette fires events, so the
-    data defend matter of any other colour.
+    this prefers the emptier one. Matter of another colour is seen against the background along
+    its outline, and the events there defend it.
 
-    It acts on SDF values, not on opacity: a term on opacity is cheapest to satisfy by keeping
-    the NeuS density blurry, which on the bunny stopped the sharpness from rising and emptied
-    the mesh.
+    Pass the opacity rendered with the NeuS sharpness held fixed
+    (``RenderOutput.opacity_fixed_s``): with the sharpness free, the cheapest way to lower
+    opacity everywhere is to keep the density blurry, which on the bunny held the sharpness
+    near 20 and emptied the mesh.
 
     Args:
-        sdf_behind: SDF at points a small distance behind the surface along each ray, (n,).
-        match: :func:`background_match` of those rays, (n,).
+        opacity: per-ray opacity, (n_rays,).
+        match: :func:`background_match` of those rays, (n_rays,), no gradient.
 
     Returns:
-        loss: scalar (0 for no rays).
+        loss: scalar.
 
     Note:
-        Differentiable in ``sdf_behind``.
+        Differentiable in ``opacity``.
     """
-    if sdf_behind.numel() == 0:
-        return sdf_behind.sum() * 0.0
-    return (match * torch.relu(-sdf_behind)).mean()
+    return (opacity * match).mean()

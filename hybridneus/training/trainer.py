@@ -206,14 +206,11 @@ class Trainer:
         return lo + u * (hi - lo)
 
     @staticmethod
-    def _surface_points(
-        out, origins: torch.Tensor, dirs: torch.Tensor, behind: float = 0.0
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The rendered surface points (expected depth, plus ``behind`` along the ray) of the
-        rays that hit something, and the mask of those rays."""
+    def _surface_points(out, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+        """The rendered surface points (expected depth) of the rays that hit something."""
         hit = out.opacity.detach() > 0.5
-        depth = out.depth.detach()[hit] / out.opacity.detach()[hit] + behind
-        return origins[hit] + depth[:, None] * dirs[hit], hit
+        depth = out.depth.detach()[hit] / out.opacity.detach()[hit]
+        return origins[hit] + depth[:, None] * dirs[hit]
 
     def _curvature(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Normal change over ``loss.curvature_step`` at surface ``points``, and the SDF
@@ -228,16 +225,6 @@ class Trainer:
         _, grad, _ = self.field.sdf_gradient_features(torch.cat([points, shifted]), True)
         grad_p, grad_s = grad.chunk(2)
         return L.curvature_loss(grad_p, grad_s), grad
-
-    def _background_matter(self, out, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-        """The background-matter term at ``loss.background_matter_depth`` behind the surface."""
-        lw = self.cfg.loss
-        behind, hit = self._surface_points(out, origins, dirs, lw.background_matter_depth)
-        match = L.background_match(
-            out.color[hit], out.opacity[hit], self.field.background(), lw.background_matter_sigma
-        )
-        sdf = self.field.sdf_and_features(behind)[0] if behind.shape[0] else behind[:, 0]
-        return L.background_matter_loss(sdf, match)
 
     def train_step(self) -> dict[str, float]:
         """Run one optimisation step; return the logged scalars."""
@@ -260,7 +247,8 @@ class Trainer:
             frame_batch = self.frames.sample(2 * cfg.train.n_rays)
             origins, dirs = frame_batch.origins, frame_batch.dirs
         out = render_rays(
-            self.field, origins, dirs, self.sampler, self.generator, True, r.crop_softness
+            self.field, origins, dirs, self.sampler, self.generator, True, r.crop_softness,
+            fixed_s_opacity=lw.lambda_background_matter > 0,
         )
         if self.frames is None:
             c0, c1 = out.color[:n], out.color[n:]
@@ -270,13 +258,16 @@ class Trainer:
         else:
             terms["rgb"] = L.rgb_loss(out.color, frame_batch.color)
         if lw.lambda_background_matter > 0:
-            terms["background_matter"] = self._background_matter(out, origins, dirs)
+            match = L.background_match(
+                out.color, out.opacity, self.field.background(), lw.background_matter_sigma
+            )
+            terms["background_matter"] = L.background_matter_loss(out.opacity_fixed_s, match)
         need_random = lw.n_random_points > 0 and (
             lw.lambda_eikonal > 0 or lw.lambda_sparsity > 0 or lw.lambda_outside > 0
         )
         grads = [out.gradients]
         if lw.lambda_curvature > 0:
-            surface, _ = self._surface_points(out, origins, dirs)
+            surface = self._surface_points(out, origins, dirs)
             if surface.shape[0] > 0:
                 terms["curvature"], grad_c = self._curvature(surface)
                 grads.append(grad_c)
