@@ -168,6 +168,7 @@ def test_background_matter_term_thins_matter_without_blurring_it(scene):
     only = tiny(
         "train.iters=30", "loss.lambda_event=0", "loss.lambda_eikonal=0",
         "loss.lambda_background_matter=1", "loss.background_matter_sigma=100",
+        "loss.background_matter_start=0",
     )
     trainer, _ = prepare(scene, only, device="cpu")
     batch = trainer.windows.sample(128)
@@ -183,6 +184,11 @@ def test_background_matter_term_thins_matter_without_blurring_it(scene):
     assert float(trainer.field.inv_s()) == pytest.approx(inv_s)
     off = prepare(scene, tiny("train.iters=1"), device="cpu")[0].train_step()
     assert "loss/background_matter" not in off
+    late = tiny("train.iters=10", "loss.lambda_background_matter=1",
+                "loss.background_matter_start=0.5")
+    trainer = prepare(scene, late, device="cpu")[0]
+    logged = ["loss/background_matter" in trainer.train_step() for _ in range(10)]
+    assert logged == [False] * 5 + [True] * 5
 
 
 def test_fixed_s_opacity_equals_the_opacity_and_sends_no_gradient_to_the_sharpness(scene):

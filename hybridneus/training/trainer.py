@@ -226,6 +226,14 @@ class Trainer:
         grad_p, grad_s = grad.chunk(2)
         return L.curvature_loss(grad_p, grad_s), grad
 
+    def _background_matter_on(self) -> bool:
+        """The background-matter term waits until the surface and its colours have formed: the
+        initial sphere's colour is the untrained head's, and nothing defends it yet."""
+        lw = self.cfg.loss
+        return lw.lambda_background_matter > 0 and (
+            self.step >= lw.background_matter_start * self.total_steps
+        )
+
     def train_step(self) -> dict[str, float]:
         """Run one optimisation step; return the logged scalars."""
         cfg = self.cfg
@@ -248,7 +256,7 @@ class Trainer:
             origins, dirs = frame_batch.origins, frame_batch.dirs
         out = render_rays(
             self.field, origins, dirs, self.sampler, self.generator, True, r.crop_softness,
-            fixed_s_opacity=lw.lambda_background_matter > 0,
+            fixed_s_opacity=self._background_matter_on(),
         )
         if self.frames is None:
             c0, c1 = out.color[:n], out.color[n:]
@@ -257,7 +265,7 @@ class Trainer:
             )
         else:
             terms["rgb"] = L.rgb_loss(out.color, frame_batch.color)
-        if lw.lambda_background_matter > 0:
+        if self._background_matter_on():
             match = L.background_match(
                 out.color, out.opacity, self.field.background(), lw.background_matter_sigma
             )
