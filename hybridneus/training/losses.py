@@ -152,7 +152,6 @@ def sparsity_loss(sdf: torch.Tensor, tau: float) -> torch.Tensor:
     return torch.exp(-tau * sdf.abs()).mean()
 
 
-
 def background_match(
     color: torch.Tensor,  # (n_rays, 3)
     opacity: torch.Tensor,  # (n_rays,)
@@ -183,7 +182,6 @@ def background_match(
     return torch.exp(-(((fg - bg).abs().amax(dim=-1) / sigma) ** 2))
 
 
-
 def background_matter_loss(opacity: torch.Tensor, match: torch.Tensor) -> torch.Tensor:
     """Mean of ``match * opacity`` over rays: thins matter that looks like the background.
 
@@ -196,7 +194,7 @@ def background_matter_loss(opacity: torch.Tensor, match: torch.Tensor) -> torch.
     Pass the opacity rendered with the NeuS sharpness held fixed
     (``RenderOutput.opacity_fixed_s``): with the sharpness free, the cheapest way to lower
     opacity everywhere is to keep the density blurry, which on the bunny held the sharpness
-    near 20 and emptied the mesh.
+    below 32 and emptied the mesh.
 
     Args:
         opacity: per-ray opacity, (n_rays,).
