@@ -105,26 +105,29 @@ def main() -> None:
         trainer.train_step()
         sync()
 
-    rows = []
-    for name, fn in [
-        ("sample placement (no grad)", placement),
-        ("grid encoding fwd+bwd", encoding_fwd_bwd),
-        ("SDF + autograd Eikonal fwd+bwd", sdf_eikonal),
-        ("colour head fwd+bwd", heads_only),
-        ("render (all of the above) fwd+bwd", render_fwd_bwd),
-        ("Adam step", optimiser),
-        ("full train_step", full_step),
-    ]:
-        if fn is optimiser:
-            # Adam skips parameters without gradients: give every one a dense gradient, as a
-            # real backward pass does.
-            for p in field.parameters():
-                p.grad = torch.zeros_like(p)
-        _timed(fn, args.warmup)
-        if fn is not optimiser:
-            trainer.optimizer.zero_grad(set_to_none=True)
-        rows.append((name, _timed(fn, args.steps)))
+    def no_grads():
         trainer.optimizer.zero_grad(set_to_none=True)
+
+    def dense_grads():
+        # Adam skips parameters without gradients: give every one a dense gradient, as a real
+        # backward pass does.
+        for p in field.parameters():
+            p.grad = torch.zeros_like(p)
+
+    rows = []
+    for name, fn, reset in [
+        ("sample placement (no grad)", placement, no_grads),
+        ("grid encoding fwd+bwd", encoding_fwd_bwd, no_grads),
+        ("SDF + autograd Eikonal fwd+bwd", sdf_eikonal, no_grads),
+        ("colour head fwd+bwd", heads_only, no_grads),
+        ("render (all of the above) fwd+bwd", render_fwd_bwd, no_grads),
+        ("Adam step", optimiser, dense_grads),
+        ("full train_step", full_step, no_grads),
+    ]:
+        reset()
+        _timed(fn, args.warmup)
+        reset()
+        rows.append((name, _timed(fn, args.steps)))
     print(f"device {trainer.device}, threads {torch.get_num_threads()}, preset {args.preset}, "
           f"{args.rays} pixels x 2 poses x {trainer.sampler.n_samples} samples = {n_pts} points")
     print("| phase | median s |")
