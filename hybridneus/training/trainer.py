@@ -254,9 +254,10 @@ class Trainer:
         else:
             frame_batch = self.frames.sample(2 * cfg.train.n_rays)
             origins, dirs = frame_batch.origins, frame_batch.dirs
+        matter_on = self._background_matter_on()
         out = render_rays(
             self.field, origins, dirs, self.sampler, self.generator, True, r.crop_softness,
-            fixed_s_opacity=self._background_matter_on(),
+            fixed_s_opacity=matter_on,
         )
         if self.frames is None:
             c0, c1 = out.color[:n], out.color[n:]
@@ -265,7 +266,7 @@ class Trainer:
             )
         else:
             terms["rgb"] = L.rgb_loss(out.color, frame_batch.color)
-        if self._background_matter_on():
+        if matter_on:
             match = L.background_match(
                 out.color, out.opacity, self.field.background(), lw.background_matter_sigma
             )
