@@ -19,7 +19,8 @@ import numpy as np
 import torch
 import trimesh
 
-ASSETS = Path("/work/shared/assets")
+# The shared assets sit beside the repository (../shared/assets), as CI lays them out.
+ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets"
 MESHES = {
     "bunny": ASSETS / "bunny" / "bunny.off",
     "xylophone": ASSETS / "xylophone" / "xylophone.obj",

@@ -18,7 +18,8 @@ import resource
 import time
 from pathlib import Path
 
-ASSETS = Path("/work/shared/assets")
+# The shared assets sit beside the repository (../shared/assets), as CI lays them out.
+ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets"
 
 
 def _mesh_source(scene: str) -> str:

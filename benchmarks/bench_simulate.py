@@ -24,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_MESH = "/work/shared/assets/oakChair/oakChair.obj"
+# The shared assets sit beside the repository (../shared/assets), as CI lays them out.
+ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets"
+DEFAULT_MESH = str(ASSETS / "oakChair" / "oakChair.obj")
 
 
 def _render_rate(renderer, c2w: np.ndarray, batch: int,

@@ -245,8 +245,16 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     if not snaps:
         raise SystemExit(f"{run_dir}: no snapshots/ to score")
 
+    loaded: dict[Path, dict] = {}
+
+    def read(path: Path) -> dict:
+        if path not in loaded:
+            loaded.clear()  # snapshots are read in order; keep one in memory
+            loaded[path] = torch.load(path, map_location="cpu", weights_only=True)
+        return loaded[path]
+
     def load(path: Path):
-        snap = torch.load(path, map_location="cpu", weights_only=True)
+        snap = read(path)
         f = build_field(cfg, snap["scene"])
         f.load_state_dict(snap["model"])
         f.update_step(int(snap["step"]), int(snap["total_steps"]))
@@ -254,7 +262,7 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
 
     # The untrained field (same seed, same construction as the trainer's) starts the curve.
     torch.manual_seed(cfg.train.seed)
-    first = torch.load(snaps[0], map_location="cpu", weights_only=True)
+    first = read(snaps[0])
     initial, _ = _score_field(build_field(cfg, first["scene"]).eval(), gt, res)
     curve = [[0.0, 0, initial["chamfer"]]]
     for path in snaps[:-1]:

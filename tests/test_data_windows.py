@@ -129,20 +129,6 @@ def test_batch_target_rays_and_dtypes(tmp_path):
     assert b.to("cpu").target.device.type == "cpu"
 
 
-def test_quiet_marks_pixels_without_any_event(tmp_path):
-    # (1, 1): +1 then -1, which cancel in the frame but are not quiet; (4, 2): one event;
-    # (6, 3): its only event lies after the window; (0, 0): none at all.
-    ev = _events([1, 1, 4, 6], [1, 1, 2, 3], [1.2, 1.8, 2.5, 3.5], [1, -1, 1, 1])
-    ds = _split(tmp_path, ev, group="nerf/lego", polarity_offset=0.0)
-    s = EventWindowSampler(ds.splits["train"], ds.preset, seed=0)
-    _fixed(s, 3, 1.0, 3.0)
-    s.pick_pixels = lambda frame, n: np.array([[1, 1], [4, 2], [6, 3], [0, 0]])
-    b = s.sample(4)
-    assert b.quiet.dtype == torch.bool
-    assert b.quiet.tolist() == [False, False, True, True]
-    assert b.target.tolist() == [0.0, pytest.approx(ds.preset.threshold), 0.0, 0.0]
-
-
 def test_pose_interpolation_endpoints(tmp_path):
     sp_ds = _split(tmp_path, random_events(500, 5))
     s = EventWindowSampler(sp_ds.splits["train"], sp_ds.preset)

@@ -191,36 +191,6 @@ def test_background_matter_term_thins_matter_without_blurring_it(scene):
     assert logged == [False] * 5 + [True] * 5
 
 
-def test_background_matter_on_quiet_rays_ignores_pixels_that_fired(scene):
-    """With ``background_matter_rays=quiet`` only pixels without any event in the window count:
-    the term equals the all-rays one when every pixel is quiet, and is 0 when none is."""
-    base = [
-        "train.iters=4", "loss.lambda_background_matter=1", "loss.background_matter_sigma=100",
-        "loss.background_matter_start=0",
-    ]
-
-    def first_value(rays: str, quiet: bool | None) -> float:
-        trainer, _ = prepare(scene, tiny(*base, f"loss.background_matter_rays={rays}"),
-                             device="cpu")
-        if quiet is not None:
-            draw = trainer.windows.sample
-
-            def forced(n):
-                b = draw(n)
-                b.quiet = torch.full_like(b.quiet, quiet)
-                return b
-
-            trainer.windows.sample = forced
-        return trainer.train_step()["loss/background_matter"]
-
-    everywhere = first_value("all", None)
-    assert everywhere > 0.0
-    assert first_value("quiet", True) == pytest.approx(everywhere, rel=1e-6)
-    assert first_value("quiet", False) == 0.0
-    with pytest.raises(Exception, match="background_matter_rays"):
-        prepare(scene, tiny("loss.background_matter_rays=some"), device="cpu")
-
-
 def test_fixed_s_opacity_equals_the_opacity_and_sends_no_gradient_to_the_sharpness(scene):
     from hybridneus.rendering.renderer import render_rays
 

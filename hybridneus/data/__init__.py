@@ -29,8 +29,6 @@ if TYPE_CHECKING:
         RayBatch,
         bayer_mask,
         event_frame,
-        frame_from_counts,
-        window_counts,
     )
 
 _LAZY = {
@@ -42,8 +40,6 @@ _LAZY = {
     "RayBatch": "windows",
     "bayer_mask": "windows",
     "event_frame": "windows",
-    "frame_from_counts": "windows",
-    "window_counts": "windows",
 }
 
 
@@ -68,7 +64,6 @@ __all__ = [
     "bayer_mask",
     "camera_rays",
     "event_frame",
-    "frame_from_counts",
     "interpolate_pose",
     "load_dataset",
     "load_events",
@@ -78,5 +73,4 @@ __all__ = [
     "preset_for_path",
     "preset_for_scene",
     "resolve_preset",
-    "window_counts",
 ]

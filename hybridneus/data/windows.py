@@ -107,29 +107,6 @@ def _index_ranges(t: np.ndarray, t0: float, t1: float) -> list[tuple[int, int]]:
     return [(int(np.searchsorted(t, t0, side="left")), int(np.searchsorted(t, t1, side="left")))]
 
 
-def window_counts(split: SplitData, t0: float, t1: float) -> np.ndarray:
-    """(height * width, 2) int64 counts [negative, positive] of the events in ``[t0, t1)``.
-
-    A negative ``t0`` (>= -T) wraps as in :func:`event_frame`.
-    """
-    if t0 < -split.t_max:
-        raise ValueError(f"window_counts: t0={t0} is more than one loop (T={split.t_max}) back")
-    counter = _counter(split)
-    c = None
-    for i0, i1 in _index_ranges(split.events.t, t0, t1):
-        part = counter.counts(i0, i1)
-        c = part if c is None else c + part
-    return c
-
-
-def frame_from_counts(
-    split: SplitData, counts: np.ndarray, polarity_offset: float = 0.0
-) -> np.ndarray:
-    """(height, width) float32 ``sum(p + polarity_offset)`` from :func:`window_counts`."""
-    frame = counts[:, 1] * (1.0 + polarity_offset) + counts[:, 0] * (polarity_offset - 1.0)
-    return frame.astype(np.float32).reshape(split.height, split.width)
-
-
 def event_frame(
     split: SplitData, t0: float, t1: float, polarity_offset: float = 0.0
 ) -> np.ndarray:
@@ -146,7 +123,15 @@ def event_frame(
         (height, width) float32 ``E[y, x] = sum(p + polarity_offset)``; an event at
         column x, row y lands in ``E[y, x]``.
     """
-    return frame_from_counts(split, window_counts(split, t0, t1), polarity_offset)
+    if t0 < -split.t_max:
+        raise ValueError(f"event_frame: t0={t0} is more than one loop (T={split.t_max}) back")
+    counter = _counter(split)
+    c = None
+    for i0, i1 in _index_ranges(split.events.t, t0, t1):
+        part = counter.counts(i0, i1)
+        c = part if c is None else c + part
+    frame = c[:, 1] * (1.0 + polarity_offset) + c[:, 0] * (polarity_offset - 1.0)
+    return frame.astype(np.float32).reshape(split.height, split.width)
 
 
 def bayer_mask(xy: np.ndarray) -> np.ndarray:
@@ -171,8 +156,6 @@ class RayBatch:
         dirs1: (n_rays, 3) float32 unit directions at ``t1``.
         target: (n_rays,) float32 ``C * E[y, x]`` (E with the polarity offset).
         bayer: (n_rays, 3) float32 one-hot RGGB mask of each pixel.
-        quiet: (n_rays,) bool, True where the pixel fired no event at all in the window
-            (a +1 and a -1 cancel in ``target`` but not here).
         xy: (n_rays, 2) int64 pixel (column, row).
         view0: continuous view index of ``t0`` (wrapped into [0, N - 1]).
         view1: view index of ``t1`` (an integer value).
@@ -186,7 +169,6 @@ class RayBatch:
     dirs1: torch.Tensor
     target: torch.Tensor
     bayer: torch.Tensor
-    quiet: torch.Tensor
     xy: torch.Tensor
     view0: float
     view1: float
@@ -294,11 +276,8 @@ class EventWindowSampler:
             :class:`RayBatch` on the sampler's device.
         """
         i, t0, t1 = self.draw_window()
-        counts = window_counts(self.split, t0, t1)
-        frame = frame_from_counts(self.split, counts, self.preset.polarity_offset)
+        frame = self.frame(t0, t1)
         xy = self.pick_pixels(frame, n_rays)
-        quiet = counts.reshape(self.split.height, self.split.width, 2)[xy[:, 1], xy[:, 0]]
-        quiet = quiet.sum(axis=-1) == 0
         t0_wrapped = t0 + self.t_max if t0 < 0 else t0
         c2w0, k0 = self.pose_at(t0_wrapped)
         sp = self.split
@@ -312,7 +291,6 @@ class EventWindowSampler:
             dirs1=d1,
             target=torch.as_tensor(target, dtype=torch.float32, device=self.device),
             bayer=torch.as_tensor(bayer_mask(xy), device=self.device),
-            quiet=torch.as_tensor(quiet, device=self.device),
             xy=torch.as_tensor(xy, dtype=torch.int64, device=self.device),
             view0=t0_wrapped / self.dt,
             view1=float(i),

@@ -17,7 +17,6 @@ import numpy as np
 import torch
 
 from hybridneus.config import Config
-from hybridneus.errors import ConfigError
 from hybridneus.model.field import HybridField, crop_aabb, crop_sdf
 from hybridneus.rendering.occupancy import OccupancyGrid
 from hybridneus.rendering.renderer import render_rays
@@ -78,6 +77,8 @@ class Trainer:
         self.device = torch.device(device)
         self.dataset = dataset
         if cfg.data.split not in dataset.splits:
+            from hybridneus.errors import ConfigError
+
             raise ConfigError(
                 f"data.split: {dataset.root} has no split {cfg.data.split!r}; "
                 f"found {sorted(dataset.splits)}"
@@ -124,13 +125,10 @@ class Trainer:
                 device=self.device,
             )
         elif cfg.train.supervision != "events":
+            from hybridneus.errors import ConfigError
+
             raise ConfigError(
                 f"train.supervision: expected 'events' or 'rgb', got {cfg.train.supervision!r}"
-            )
-        if cfg.loss.background_matter_rays not in ("all", "quiet"):
-            raise ConfigError(
-                "loss.background_matter_rays: expected 'all' or 'quiet', "
-                f"got {cfg.loss.background_matter_rays!r}"
             )
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
         variance = [self.field.variance]
@@ -272,8 +270,6 @@ class Trainer:
             match = L.background_match(
                 out.color, out.opacity, self.field.background(), lw.background_matter_sigma
             )
-            if self.frames is None and lw.background_matter_rays == "quiet":
-                match = match * torch.cat([batch.quiet, batch.quiet]).to(match.dtype)
             terms["background_matter"] = L.background_matter_loss(out.opacity_fixed_s, match)
         need_random = lw.n_random_points > 0 and (
             lw.lambda_eikonal > 0 or lw.lambda_sparsity > 0 or lw.lambda_outside > 0
