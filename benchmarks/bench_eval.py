@@ -13,14 +13,12 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 import trimesh
+from run_suite import DEFAULT_ASSETS as ASSETS  # the scripts run from benchmarks/
 
-# The shared assets sit beside the repository (../shared/assets), as CI lays them out.
-ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets"
 MESHES = {
     "bunny": ASSETS / "bunny" / "bunny.off",
     "xylophone": ASSETS / "xylophone" / "xylophone.obj",

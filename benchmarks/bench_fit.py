@@ -18,8 +18,7 @@ import resource
 import time
 from pathlib import Path
 
-# The shared assets sit beside the repository (../shared/assets), as CI lays them out.
-ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets"
+from run_suite import DEFAULT_ASSETS as ASSETS  # the scripts run from benchmarks/
 
 
 def _mesh_source(scene: str) -> str:

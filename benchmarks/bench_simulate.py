@@ -23,9 +23,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from run_suite import DEFAULT_ASSETS as ASSETS  # the scripts run from benchmarks/
 
-# The shared assets sit beside the repository (../shared/assets), as CI lays them out.
-ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets"
 DEFAULT_MESH = str(ASSETS / "oakChair" / "oakChair.obj")
 
 

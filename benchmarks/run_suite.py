@@ -245,16 +245,11 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     if not snaps:
         raise SystemExit(f"{run_dir}: no snapshots/ to score")
 
-    loaded: dict[Path, dict] = {}
-
-    def read(path: Path) -> dict:
-        if path not in loaded:
-            loaded.clear()  # snapshots are read in order; keep one in memory
-            loaded[path] = torch.load(path, map_location="cpu", weights_only=True)
-        return loaded[path]
+    first = torch.load(snaps[0], map_location="cpu", weights_only=True)
 
     def load(path: Path):
-        snap = read(path)
+        snap = first if path == snaps[0] else torch.load(path, map_location="cpu",
+                                                          weights_only=True)
         f = build_field(cfg, snap["scene"])
         f.load_state_dict(snap["model"])
         f.update_step(int(snap["step"]), int(snap["total_steps"]))
@@ -262,7 +257,6 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
 
     # The untrained field (same seed, same construction as the trainer's) starts the curve.
     torch.manual_seed(cfg.train.seed)
-    first = read(snaps[0])
     initial, _ = _score_field(build_field(cfg, first["scene"]).eval(), gt, res)
     curve = [[0.0, 0, initial["chamfer"]]]
     for path in snaps[:-1]:
