@@ -57,6 +57,7 @@ class FieldConfig:
     color_position_frequencies: int = 0  # PE(x) bands fed to the colour head (0: none)
     inv_s_init: float = 0.3  # NeuS variance parameter v; inv_s = exp(10 v)
     learned_background: bool = False  # learn the background colour instead of the preset's
+    color_init: str = "grey"  # grey (the sigmoid midpoint) or contrast (0.5 from the background)
 
 
 @dataclass
@@ -91,6 +92,7 @@ class LossConfig:
     lambda_background_matter: float = 0.0  # thin matter that looks like the background
     background_matter_sigma: float = 0.1  # colour distance at which that term fades (exp(-(d/s)^2))
     background_matter_start: float = 0.25  # fraction of training before that term starts
+    background_matter_end: float = 1.0  # fraction of training at which that term stops
     n_random_points: int = 1024  # random volume points per step for Eikonal/regularisers
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
     curvature_step: float = 0.01  # finite-difference step of the curvature term (world units)

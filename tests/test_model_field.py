@@ -102,3 +102,27 @@ def test_learned_background_is_a_parameter():
     names = [n for n, _ in f.named_parameters()]
     assert "background_logit" in names
     assert torch.allclose(f.background(), torch.full((3,), 159 / 255), atol=1e-4)
+
+
+@pytest.mark.parametrize("background", [(159 / 255,) * 3, (0.2, 0.8, 0.5)])
+def test_contrast_color_init_starts_half_away_from_the_background(background):
+    torch.manual_seed(0)
+    grid = GridConfig(n_levels=4, log2_table_size=12, base_resolution=8, max_resolution=32)
+    f = HybridField(grid, FieldConfig(color_init="contrast"), background=background)
+    pts = torch.rand(500, 3) * 0.6 - 0.3
+    dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
+    with torch.no_grad():
+        c = f.color(pts, dirs)
+    gap = (c - torch.tensor(background)).abs()
+    # The untrained head adds small terms to its output bias.
+    assert gap.min() > 0.45 and gap.max() < 0.55
+    grey = small_field()
+    with torch.no_grad():
+        assert (grey.color(pts, dirs) - 0.5).abs().max() < 0.05
+
+
+def test_unknown_color_init_is_a_config_error():
+    from hybridneus.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="field.color_init"):
+        small_field(color_init="black")

@@ -18,6 +18,7 @@ reconstruction volume [-1, 1]^3 are encoded by a multiresolution grid at ``(x + 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -145,6 +146,12 @@ class HybridField(nn.Module):
             )
         act = nn.ReLU() if field.color_activation == "relu" else nn.Softplus()
         self.color_net = make_mlp(color_in, field.color_hidden, field.color_layers, 3, (), act)
+        if field.color_init not in ("grey", "contrast"):
+            raise ConfigError(
+                f"field.color_init: unknown {field.color_init!r}; expected grey or contrast"
+            )
+        if field.color_init == "contrast":
+            self._init_color_away_from(background)
         self.variance = nn.Parameter(torch.tensor(float(field.inv_s_init)))
         self.register_buffer("crop", torch.tensor([float(c) for c in crop]))
         bg = torch.tensor([float(c) for c in background]).clamp(1e-3, 1 - 1e-3)
@@ -332,6 +339,19 @@ class HybridField(nn.Module):
         return out.cpu().numpy() if was_numpy else out
 
     # ------------------------------------------------------------------ init
+
+    @torch.no_grad()
+    def _init_color_away_from(self, background: Sequence[float]) -> None:
+        """Start every channel 0.5 away from the background's (below it if it is above 0.5).
+
+        Matter of the background's colour fires no events against the background, so where
+        no camera sees the initial shape against anything else, matter that starts near the
+        background's colour is never carved. Starting far from it makes the initial shape's
+        outline fire strong predicted events; where none were recorded, the loss removes it.
+        """
+        bg = torch.tensor([float(c) for c in background])
+        target = torch.where(bg >= 0.5, bg - 0.5, bg + 0.5).clamp(0.02, 0.98)
+        self.color_net.layers[-1].bias.copy_(torch.logit(target))
 
     @torch.no_grad()
     def _center_sphere(self, n: int = 512) -> None:
