@@ -92,7 +92,6 @@ class LossConfig:
     lambda_background_matter: float = 0.0  # thin matter that looks like the background
     background_matter_sigma: float = 0.1  # colour distance at which that term fades (exp(-(d/s)^2))
     background_matter_start: float = 0.25  # fraction of training before that term starts
-    background_matter_end: float = 1.0  # fraction of training at which that term stops
     n_random_points: int = 1024  # random volume points per step for Eikonal/regularisers
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
     curvature_step: float = 0.01  # finite-difference step of the curvature term (world units)

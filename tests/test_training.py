@@ -189,11 +189,6 @@ def test_background_matter_term_thins_matter_without_blurring_it(scene):
     trainer = prepare(scene, late, device="cpu")[0]
     logged = ["loss/background_matter" in trainer.train_step() for _ in range(10)]
     assert logged == [False] * 5 + [True] * 5
-    window = tiny("train.iters=10", "loss.lambda_background_matter=1",
-                  "loss.background_matter_start=0.2", "loss.background_matter_end=0.6")
-    trainer = prepare(scene, window, device="cpu")[0]
-    logged = ["loss/background_matter" in trainer.train_step() for _ in range(10)]
-    assert logged == [False] * 2 + [True] * 4 + [False] * 4
 
 
 def test_fixed_s_opacity_equals_the_opacity_and_sends_no_gradient_to_the_sharpness(scene):

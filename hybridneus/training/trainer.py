@@ -228,14 +228,10 @@ class Trainer:
 
     def _background_matter_on(self) -> bool:
         """The background-matter term waits until the surface and its colours have formed: the
-        initial sphere's colour is the untrained head's, and nothing defends it yet. Ending it
-        early lets the events restore real matter it thinned, while matter no event defends
-        stays gone."""
+        initial sphere's colour is the untrained head's, and nothing defends it yet."""
         lw = self.cfg.loss
         return lw.lambda_background_matter > 0 and (
-            lw.background_matter_start * self.total_steps
-            <= self.step
-            < lw.background_matter_end * self.total_steps
+            self.step >= lw.background_matter_start * self.total_steps
         )
 
     def train_step(self) -> dict[str, float]:
