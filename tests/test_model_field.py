@@ -11,10 +11,10 @@ from hybridneus.model.field import HybridField, crop_sdf
 from hybridneus.model.protocol import Field
 
 
-def small_field(**field_kw) -> HybridField:
+def small_field(background=(159 / 255,) * 3, **field_kw) -> HybridField:
     torch.manual_seed(0)
     grid = GridConfig(n_levels=4, log2_table_size=12, base_resolution=8, max_resolution=32)
-    return HybridField(grid, FieldConfig(**field_kw))
+    return HybridField(grid, FieldConfig(**field_kw), background=background)
 
 
 def test_initial_sdf_is_a_sphere_of_the_init_radius():
@@ -106,9 +106,7 @@ def test_learned_background_is_a_parameter():
 
 @pytest.mark.parametrize("background", [(159 / 255,) * 3, (0.2, 0.8, 0.5)])
 def test_contrast_color_init_starts_half_away_from_the_background(background):
-    torch.manual_seed(0)
-    grid = GridConfig(n_levels=4, log2_table_size=12, base_resolution=8, max_resolution=32)
-    f = HybridField(grid, FieldConfig(color_init="contrast"), background=background)
+    f = small_field(background, color_init="contrast")
     pts = torch.rand(500, 3) * 0.6 - 0.3
     dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
     with torch.no_grad():
