@@ -57,7 +57,8 @@ class FieldConfig:
     color_position_frequencies: int = 0  # PE(x) bands fed to the colour head (0: none)
     inv_s_init: float = 0.3  # NeuS variance parameter v; inv_s = exp(10 v)
     learned_background: bool = False  # learn the background colour instead of the preset's
-    color_init: str = "grey"  # grey (the sigmoid midpoint) or contrast (0.5 from the background)
+    color_init: str = "grey"  # grey (the sigmoid midpoint) or contrast (away from the background)
+    color_init_distance: float = 0.5  # color_init=contrast: start this far from the background
 
 
 @dataclass

@@ -105,15 +105,16 @@ def test_learned_background_is_a_parameter():
 
 
 @pytest.mark.parametrize("background", [(159 / 255,) * 3, (0.2, 0.8, 0.5)])
-def test_contrast_color_init_starts_half_away_from_the_background(background):
-    f = small_field(background, color_init="contrast")
+@pytest.mark.parametrize("distance", [0.5, 0.3])
+def test_contrast_color_init_starts_the_distance_away_from_the_background(background, distance):
+    f = small_field(background, color_init="contrast", color_init_distance=distance)
     pts = torch.rand(500, 3) * 0.6 - 0.3
     dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
     with torch.no_grad():
         c = f.color(pts, dirs)
     gap = (c - torch.tensor(background)).abs()
     # The untrained head adds small terms to its output bias.
-    assert gap.min() > 0.45 and gap.max() < 0.55
+    assert gap.min() > distance - 0.05 and gap.max() < distance + 0.05
     grey = small_field()
     with torch.no_grad():
         assert (grey.color(pts, dirs) - 0.5).abs().max() < 0.05
@@ -124,3 +125,5 @@ def test_unknown_color_init_is_a_config_error():
 
     with pytest.raises(ConfigError, match="field.color_init"):
         small_field(color_init="black")
+    with pytest.raises(ConfigError, match="field.color_init_distance"):
+        small_field(color_init="contrast", color_init_distance=1.5)

@@ -150,8 +150,12 @@ class HybridField(nn.Module):
             raise ConfigError(
                 f"field.color_init: unknown {field.color_init!r}; expected grey or contrast"
             )
+        if not 0.0 < field.color_init_distance <= 1.0:
+            raise ConfigError(
+                f"field.color_init_distance: {field.color_init_distance} is outside (0, 1]"
+            )
         if field.color_init == "contrast":
-            self._init_color_away_from(background)
+            self._init_color_away_from(background, field.color_init_distance)
         self.variance = nn.Parameter(torch.tensor(float(field.inv_s_init)))
         self.register_buffer("crop", torch.tensor([float(c) for c in crop]))
         bg = torch.tensor([float(c) for c in background]).clamp(1e-3, 1 - 1e-3)
@@ -341,8 +345,8 @@ class HybridField(nn.Module):
     # ------------------------------------------------------------------ init
 
     @torch.no_grad()
-    def _init_color_away_from(self, background: Sequence[float]) -> None:
-        """Start every channel 0.5 away from the background's (below it if it is above 0.5).
+    def _init_color_away_from(self, background: Sequence[float], distance: float) -> None:
+        """Start every channel ``distance`` from the background (below it if it is above 0.5).
 
         Matter of the background's colour fires no events against the background, so where
         no camera sees the initial shape against anything else, matter that starts near the
@@ -350,7 +354,7 @@ class HybridField(nn.Module):
         outline fire strong predicted events; where none were recorded, the loss removes it.
         """
         bg = torch.tensor([float(c) for c in background])
-        target = torch.where(bg >= 0.5, bg - 0.5, bg + 0.5).clamp(0.02, 0.98)
+        target = torch.where(bg >= 0.5, bg - distance, bg + distance).clamp(0.02, 0.98)
         self.color_net.layers[-1].bias.copy_(torch.logit(target))
 
     @torch.no_grad()
