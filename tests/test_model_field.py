@@ -115,7 +115,12 @@ def test_contrast_color_init_starts_the_distance_away_from_the_background(backgr
     gap = (c - torch.tensor(background)).abs()
     # The untrained head adds small terms to its output bias.
     assert gap.min() > distance - 0.05 and gap.max() < distance + 0.05
+
+
+def test_grey_color_init_starts_at_the_sigmoid_midpoint():
     grey = small_field()
+    pts = torch.rand(500, 3) * 0.6 - 0.3
+    dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
     with torch.no_grad():
         assert (grey.color(pts, dirs) - 0.5).abs().max() < 0.05
 

@@ -18,7 +18,6 @@ reconstruction volume [-1, 1]^3 are encoded by a multiresolution grid at ``(x + 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -154,11 +153,12 @@ class HybridField(nn.Module):
             raise ConfigError(
                 f"field.color_init_distance: {field.color_init_distance} is outside (0, 1]"
             )
+        background_rgb = torch.tensor([float(c) for c in background])
         if field.color_init == "contrast":
-            self._init_color_away_from(background, field.color_init_distance)
+            self._init_color_away_from(background_rgb, field.color_init_distance)
         self.variance = nn.Parameter(torch.tensor(float(field.inv_s_init)))
         self.register_buffer("crop", torch.tensor([float(c) for c in crop]))
-        bg = torch.tensor([float(c) for c in background]).clamp(1e-3, 1 - 1e-3)
+        bg = background_rgb.clamp(1e-3, 1 - 1e-3)
         self.register_buffer("background_const", bg)
         self.background_logit: nn.Parameter | None = None
         if field.learned_background:
@@ -345,7 +345,7 @@ class HybridField(nn.Module):
     # ------------------------------------------------------------------ init
 
     @torch.no_grad()
-    def _init_color_away_from(self, background: Sequence[float], distance: float) -> None:
+    def _init_color_away_from(self, background: torch.Tensor, distance: float) -> None:
         """Start every channel ``distance`` from the background (below it if it is above 0.5).
 
         Matter of the background's colour fires no events against the background, so where
@@ -353,8 +353,9 @@ class HybridField(nn.Module):
         background's colour is never carved. Starting far from it makes the initial shape's
         outline fire strong predicted events; where none were recorded, the loss removes it.
         """
-        bg = torch.tensor([float(c) for c in background])
-        target = torch.where(bg >= 0.5, bg - distance, bg + distance).clamp(0.02, 0.98)
+        target = torch.where(
+            background >= 0.5, background - distance, background + distance
+        ).clamp(0.02, 0.98)
         self.color_net.layers[-1].bias.copy_(torch.logit(target))
 
     @torch.no_grad()
