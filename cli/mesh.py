@@ -47,6 +47,13 @@ def mesh(
     clip: Annotated[
         bool, typer.Option("--clip/--no-clip", help="Clip to the scene's crop cylinder.")
     ] = True,
+    trim_crop: Annotated[
+        bool,
+        typer.Option(
+            "--trim-crop/--keep-crop-cap",
+            help="Drop the cap the crop cylinder puts on matter that reaches it (open mesh).",
+        ),
+    ] = False,
     chunk: Annotated[int, typer.Option("--chunk", help="Points per field query.")] = 2**18,
     preview: Annotated[
         bool, typer.Option("--preview/--no-preview", help="Write a PNG preview.")
@@ -85,6 +92,7 @@ def mesh(
         min_component_faces=min_component_faces or None,
         keep_largest=keep_largest,
         decimate=decimate or None,
+        trim_crop=trim_crop,
     )
     stats = ExtractionStats()
     start = time.perf_counter()

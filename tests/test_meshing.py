@@ -15,6 +15,7 @@ from hybridneus.meshing import (
     extract_sdf_mesh,
 )
 from hybridneus.model.analytic import BoxField, SphereField, TorusField, UnionField
+from hybridneus.model.field import crop_sdf
 from hybridneus.model.protocol import Field
 
 RAW = PostprocessOptions(enabled=False)
@@ -81,6 +82,48 @@ def test_bounds_and_crop_select_the_world_volume():
     voxel = 2 * 0.25 * 1.02 / 63
     assert (v[:, 0] ** 2 + v[:, 2] ** 2 <= (0.25 + voxel) ** 2).all()
     assert v[:, 1].min() >= -0.3 - voxel and v[:, 1].max() <= 0.2 + voxel
+
+
+class _SphereCutByCrop(SphereField):
+    """A sphere reaching below the crop's floor, cut as a trained field is: max(sdf, crop)."""
+
+    def __init__(self, radius: float, crop: CropVolume) -> None:
+        super().__init__(radius)
+        self.crop = torch.tensor([crop.r, crop.y_min, crop.y_max])
+
+    def _sdf(self, points: torch.Tensor) -> torch.Tensor:
+        return torch.maximum(super()._sdf(points), crop_sdf(points, self.crop))
+
+
+def test_trim_crop_removes_only_the_cap_the_crop_cuts():
+    crop = CropVolume(0.6, -0.2, 0.6)
+    field = _SphereCutByCrop(0.4, crop)
+    kept = extract_mesh(field, res=64, crop=crop, progress=False)
+    trimmed = extract_mesh(field, res=64, crop=crop, progress=False,
+                           postprocess=PostprocessOptions(trim_crop=True))
+    voxel = 1.2 * 1.02 / 63
+    cap = np.pi * (0.4**2 - 0.2**2)  # the disc where the floor y = -0.2 cuts the sphere
+    above = 2 * np.pi * 0.4 * (0.4 + 0.2)  # the sphere's zone above the floor
+    assert kept.area == pytest.approx(above + cap, rel=0.03)
+    assert trimmed.area == pytest.approx(above, rel=0.03)
+    assert kept.is_watertight and not trimmed.is_watertight
+    # what is left is the sphere, down to its rim on the floor
+    assert np.abs(np.linalg.norm(trimmed.vertices, axis=1) - 0.4).max() < voxel
+    assert trimmed.vertices[:, 1].min() > -0.2 - voxel
+    # a surface that stays clear of the crop loses nothing
+    inner = SphereField(0.3)
+    assert len(extract_mesh(inner, res=64, crop=crop, progress=False).faces) == len(
+        extract_mesh(inner, res=64, crop=crop, progress=False,
+                     postprocess=PostprocessOptions(trim_crop=True)).faces)
+
+
+def test_crop_boundary_distance():
+    crop = CropVolume(0.5, -0.2, 0.3)
+    points = np.array([[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.0, -0.15, 0.0], [0.0, 0.5, 0.0],
+                       [0.7, 0.0, 0.0], [0.0, 0.0, -0.5]])
+    assert crop.boundary_distance(points) == pytest.approx([0.2, 0.1, 0.05, 0.2, 0.2, 0.0])
+    assert crop.boundary_normal(points) == pytest.approx(
+        np.array([[0, -1, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [1, 0, 0], [0, 0, -1]]))
 
 
 @pytest.mark.parametrize("coarse, refine", [(8, True), (4, True), (16, True), (4, False)])

@@ -54,3 +54,21 @@ def test_mesh_options_and_errors(runs, tmp_path, cli, monkeypatch):
     monkeypatch.chdir(tmp_path)  # no runs/ here
     code, err = cli("--res", "32")
     assert code == 2 and "no run" in err
+
+
+def test_trim_crop_flag_reaches_the_postprocessing(runs, tmp_path, cli, monkeypatch):
+    import hybridneus.meshing.extract as extract
+
+    seen = []
+    real = extract.extract_mesh
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs["postprocess"].trim_crop)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(extract, "extract_mesh", spy)
+    for flag in ("--trim-crop", "--keep-crop-cap"):
+        code, err = cli(str(runs), "--res", "32", "--out", str(tmp_path / f"{flag}.ply"),
+                        "--no-preview", "--device", "cpu", flag)
+        assert code == 0, err
+    assert seen == [True, False]

@@ -438,6 +438,8 @@ def extract_mesh(
     )
     if options.clip is not None and options.clip_margin is None:
         options = dataclasses.replace(options, clip_margin=0.5 * grid.voxel)
+    if options.clip is not None and options.trim_tolerance is None:
+        options = dataclasses.replace(options, trim_tolerance=grid.voxel)
     t0 = time.perf_counter()
     mesh = postprocess_mesh(mesh, options)
     run_stats.times["postprocess"] = time.perf_counter() - t0

@@ -1,7 +1,8 @@
 """Mesh clean-up after marching cubes: clip, weld, de-duplicate, repair, drop floaters, decimate.
 
 Order (each step optional, see :class:`PostprocessOptions`):
-    1. clip to the crop cylinder (faces with a vertex outside are dropped);
+    1. clip to the crop cylinder (faces with a vertex outside are dropped), then trim the
+       crop's cut (faces lying on the cylinder: the cap that closes matter reaching the crop);
     2. merge vertices closer than ``merge_distance``; remove duplicate and zero-area faces;
     3. repair non-manifold edges (by removing faces) and vertices (by splitting);
     4. remove connected components smaller than ``min_component_diameter`` (fraction of the
@@ -39,6 +40,12 @@ class PostprocessOptions:
         clip_margin: grow the cylinder by this much (world units) before clipping, so that
             surfaces lying on it survive marching-cubes jitter; None = 0 here and half a
             voxel in :func:`~hybridneus.meshing.extract.extract_mesh`.
+        trim_crop: with ``clip``, also drop the cap that the crop puts on matter reaching
+            it: faces within ``trim_tolerance`` of the cylinder and facing along its normal
+            (see :func:`trim_crop_cut`). Off by default, since it leaves the mesh open.
+        trim_tolerance: world units; None = ``clip_margin`` here and one voxel in
+            :func:`~hybridneus.meshing.extract.extract_mesh` (a vertex on the cut can sit up to
+            a voxel from the cylinder where the field's own SDF is shallow).
     """
 
     enabled: bool = True
@@ -51,6 +58,8 @@ class PostprocessOptions:
     decimate: int | None = None
     clip: CropVolume | None = None
     clip_margin: float | None = None
+    trim_crop: bool = False
+    trim_tolerance: float | None = None
 
 
 def _vertex_colors(mesh: trimesh.Trimesh) -> np.ndarray | None:
@@ -108,6 +117,29 @@ def clip_mesh(mesh: trimesh.Trimesh, crop: CropVolume, margin: float = 0.0) -> t
     return _rebuild(np.asarray(mesh.vertices), np.asarray(mesh.faces)[keep], _vertex_colors(mesh))
 
 
+def trim_crop_cut(
+    mesh: trimesh.Trimesh, crop: CropVolume, tolerance: float, min_cos: float = 0.9
+) -> trimesh.Trimesh:
+    """Drop the faces that lie on the crop's surface and face the way it does.
+
+    Where matter reaches the crop, the cropped SDF ``max(sdf, crop_sdf)`` closes it with a
+    cap on the cylinder; no view supervised that cap (the crop is a user's box, and density
+    outside it is zero), so it is a cut, not a reconstructed surface. A face is part of the
+    cap when its three vertices lie within ``tolerance`` of the cylinder and its normal is
+    within ``arccos(min_cos)`` of the cylinder's outward normal (so a surface that crosses
+    the crop at an angle keeps its faces up to the rim). The mesh is left open there;
+    colours are kept.
+    """
+    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    if faces.shape[0] == 0:
+        return mesh
+    near = crop.boundary_distance(vertices)[faces].max(axis=1) <= tolerance
+    along = (np.asarray(mesh.face_normals) * crop.boundary_normal(
+        vertices[faces].mean(axis=1))).sum(axis=1) >= min_cos
+    keep = ~(near & along)
+    return _rebuild(vertices, faces[keep], _vertex_colors(mesh))
+
+
 def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Connected-component label (n_faces,) of each face (faces sharing a vertex are joined)."""
     from scipy.sparse import coo_matrix
@@ -148,6 +180,10 @@ def postprocess_mesh(
         return mesh
     if options.clip is not None:
         mesh = clip_mesh(mesh, options.clip, options.clip_margin or 0.0)
+        if options.trim_crop:
+            tolerance = options.trim_tolerance
+            mesh = trim_crop_cut(mesh, options.clip, tolerance if tolerance is not None
+                                 else options.clip_margin or 0.0)
         if len(mesh.faces) == 0:
             return mesh
 

@@ -38,6 +38,33 @@ class CropVolume:
         hi = np.minimum(hi + margin, limit)
         return tuple(lo.tolist()), tuple(hi.tolist())  # type: ignore[return-value]
 
+    def boundary_distance(self, points: np.ndarray) -> np.ndarray:
+        """Unsigned distance (n,) from each of ``points`` (n, 3) to the cylinder's surface.
+
+        Exact inside and beside the cylinder; outside its rims the larger of the radial and
+        vertical distances (a lower bound), which is all that near-surface tests need.
+        """
+        radial = np.sqrt(points[:, 0] ** 2 + points[:, 2] ** 2) - self.r
+        vertical = np.maximum(self.y_min - points[:, 1], points[:, 1] - self.y_max)
+        inside = np.minimum(np.abs(radial), np.abs(vertical))
+        return np.where((radial <= 0) & (vertical <= 0), inside, np.maximum(radial, vertical))
+
+    def boundary_normal(self, points: np.ndarray) -> np.ndarray:
+        """Outward unit normal (n, 3) of the part of the cylinder (side, floor, top) nearest
+        to each of ``points`` (n, 3); points on the axis get the floor's or top's normal."""
+        rho = np.sqrt(points[:, 0] ** 2 + points[:, 2] ** 2)
+        gaps = np.stack([np.abs(rho - self.r), np.abs(points[:, 1] - self.y_min),
+                         np.abs(points[:, 1] - self.y_max)], axis=1)
+        gaps[rho < 1e-12, 0] = np.inf
+        part = gaps.argmin(axis=1)
+        normals = np.zeros_like(points, dtype=np.float64)
+        side = part == 0
+        normals[side, 0] = points[side, 0] / rho[side]
+        normals[side, 2] = points[side, 2] / rho[side]
+        normals[part == 1, 1] = -1.0
+        normals[part == 2, 1] = 1.0
+        return normals
+
     def contains(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """Whether each of ``points`` (n_points, 3) lies inside (grown by ``margin``) -> (n,)."""
         radial = points[:, 0] ** 2 + points[:, 2] ** 2 <= (self.r + margin) ** 2
