@@ -32,7 +32,12 @@ def _resolve_config(config: Config | str | None, overrides: Sequence[str]) -> Co
 
 
 def load_training_data(cfg: Config, dataset: Any = None):
-    """Load ``dataset`` (path or EventDataset) with the config's preset overrides."""
+    """Load ``dataset`` (path or EventDataset) with the config's preset overrides.
+
+    With ``data.crop_from_events`` and no crop set in the config, the preset's crop is shrunk
+    to the events' visual hull (:func:`hybridneus.data.hull.event_hull_crop`) and written into
+    ``cfg.data`` (so the run's config records it and a resume reuses it).
+    """
     from hybridneus.data import EventDataset, load_dataset
     from hybridneus.data import apply_overrides as preset_overrides
 
@@ -44,12 +49,44 @@ def load_training_data(cfg: Config, dataset: Any = None):
             dataset.preset = preset_overrides(dataset.preset, cfg.data.overrides())
         if not cfg.data.path:
             cfg.data.path = str(dataset.root)
+    else:
+        path = dataset if dataset is not None else cfg.data.path
+        if not path:
+            raise ConfigError("data.path: no dataset given")
+        cfg.data.path = str(Path(path).resolve())
+        dataset = load_dataset(
+            path, overrides=cfg.data.overrides() or None, splits=cfg.data.split
+        )
+    crop_keys = ("crop_r", "crop_y_min", "crop_y_max")
+    if cfg.data.crop_from_events and all(getattr(cfg.data, k) is None for k in crop_keys):
+        dataset = _crop_from_events(cfg, dataset, crop_keys)
+    return dataset
+
+
+def _crop_from_events(cfg: Config, dataset: Any, crop_keys: tuple[str, ...]) -> Any:
+    """``dataset`` (a copy) with its preset's crop shrunk to the event hull, if it shrinks."""
+    import copy
+    import logging
+
+    from hybridneus.data import apply_overrides as preset_overrides
+    from hybridneus.data.hull import event_hull_crop
+
+    p = dataset.preset
+    crop = (p.crop_r, p.crop_y_min, p.crop_y_max)
+    tight = event_hull_crop(dataset[cfg.data.split], crop)
+    if tight is None or all(abs(a - b) < 1e-6 for a, b in zip(tight, crop, strict=True)):
         return dataset
-    path = dataset if dataset is not None else cfg.data.path
-    if not path:
-        raise ConfigError("data.path: no dataset given")
-    cfg.data.path = str(Path(path).resolve())
-    return load_dataset(path, overrides=cfg.data.overrides() or None, splits=cfg.data.split)
+    for key, value in zip(crop_keys, tight, strict=True):
+        setattr(cfg.data, key, round(float(value), 4))
+    values = {k: getattr(cfg.data, k) for k in crop_keys}
+    dataset = copy.copy(dataset)
+    dataset.preset = preset_overrides(p, values)
+    msg = (f"crop from the events' visual hull: r {values['crop_r']}, y {values['crop_y_min']}"
+           f" .. {values['crop_y_max']} (preset: r {p.crop_r:g}, y {p.crop_y_min:g} .. "
+           f"{p.crop_y_max:g}; data.crop_from_events=false keeps the preset's)")
+    logging.getLogger("hybridneus").info(msg)
+    dataset.notes = [*dataset.notes, msg]
+    return dataset
 
 
 def fit(

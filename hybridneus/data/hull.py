@@ -1,0 +1,154 @@
+"""Where the object can be, from the events alone: a visual hull of per-view event silhouettes.
+
+Against a constant background, only the object fires events. For a view ``i``, the pixels that
+fired within ``window`` views of it outline the object's image (its silhouette edges move as
+the camera does); their filled convex hull, grown by ``dilate`` pixels, contains the object's
+image. A point that projects inside the image but outside that hull in any view is free
+space. The hull is conservative (convex per view, dilated, sensor noise only grows it) and
+cannot see into concavities; it is used to tighten the scene's crop cylinder
+(:func:`event_hull_crop`), never to cut the surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hybridneus.data.dataset import SplitData
+
+
+@dataclass
+class EventHull:
+    """Occupancy of a regular grid: ``occupied[i, j, k]`` at ``origin + voxel * (i, j, k)``."""
+
+    occupied: np.ndarray
+    origin: np.ndarray
+    voxel: float
+    n_views: int
+
+
+def event_silhouettes(
+    split: SplitData, window: int = 1, dilate: int = 2, step: int = 6
+) -> tuple[list[int], list[np.ndarray]]:
+    """(view indices, boolean (height, width) masks) for every ``step``-th view: the filled
+    convex hull of the pixels that fired within ``window`` views of it, grown by ``dilate``
+    pixels. Views with fewer than three firing pixels are skipped (nothing to outline)."""
+    import cv2
+
+    from hybridneus.data.windows import EventCounter
+
+    w, h = split.width, split.height
+    counter = EventCounter(split.events, w, h)
+    t, times = split.events.t, split.view_times
+    views, masks = [], []
+    kernel = np.ones((2 * dilate + 1,) * 2, np.uint8) if dilate > 0 else None
+    for i in range(window, split.n_views - window, max(step, 1)):
+        a = int(np.searchsorted(t, times[i - window], side="left"))
+        b = int(np.searchsorted(t, times[i + window], side="right"))
+        ys, xs = np.nonzero(counter.counts(a, b).sum(axis=1).reshape(h, w) > 0)
+        if xs.size < 3:
+            continue
+        mask = np.zeros((h, w), np.uint8)
+        cv2.fillConvexPoly(mask, cv2.convexHull(np.stack([xs, ys], 1).astype(np.int32)), 1)
+        if kernel is not None:
+            mask = cv2.dilate(mask, kernel)
+        views.append(i)
+        masks.append(mask.astype(bool))
+    return views, masks
+
+
+def project_to_pixels(
+    split: SplitData, view: int, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel (column, row) indices of world ``points`` (n, 3) in ``view``, and whether each
+    is in front of the camera; the inverse of :func:`hybridneus.data.rays.camera_rays`
+    (its radial model is inverted by fixed-point iteration)."""
+    c2w = split.c2w[view]
+    cam = (points - c2w[:3, 3]) @ c2w[:3, :3]
+    z = cam[:, 2]
+    xn = cam[:, :2] / np.where(np.abs(z) < 1e-9, 1e-9, z)[:, None]
+    k1, k2 = (float(v) for v in split.distortion[view])
+    if k1 or k2:  # rays divide distorted coordinates by 1 + k1 r^2 + k2 r^4
+        xd = xn.copy()
+        for _ in range(8):
+            r2 = (xd**2).sum(axis=1, keepdims=True)
+            xd = xn * (1.0 + k1 * r2 + k2 * r2 * r2)
+        xn = xd
+    K = split.intrinsics[view]
+    u = K[0, 0] * xn[:, 0] + K[0, 1] * xn[:, 1] + K[0, 2] - 0.5
+    v = K[1, 1] * xn[:, 1] + K[1, 2] - 0.5
+    return np.floor(u + 0.5).astype(np.int64), np.floor(v + 0.5).astype(np.int64), z > 0
+
+
+def event_hull(
+    split: SplitData,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    resolution: int = 64,
+    window: int = 1,
+    dilate: int = 2,
+    step: int = 6,
+    min_seen: float = 0.1,
+    min_votes: float = 0.05,
+) -> EventHull:
+    """The visual hull of the event silhouettes on a grid over the box [lo, hi] with
+    ``resolution`` points along its longest side. A point is free when at least ``min_votes``
+    of the views that see it (in front, inside the image) see it outside their silhouette,
+    when fewer than ``min_seen`` of the views see it at all (the object is in most views'
+    images), or when it is farther from the origin than the nearest camera (the object is
+    inside the ring)."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    voxel = float((hi - lo).max()) / (resolution - 1)
+    shape = tuple(int(np.ceil((hi - lo)[k] / voxel - 1e-9)) + 1 for k in range(3))
+    axes = [lo[k] + voxel * np.arange(shape[k]) for k in range(3)]
+    points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    n_out = np.zeros(points.shape[0], dtype=np.int32)
+    n_seen = np.zeros(points.shape[0], dtype=np.int32)
+    views, masks = event_silhouettes(split, window, dilate, step)
+    for view, mask in zip(views, masks, strict=True):
+        u, v, front = project_to_pixels(split, view, points)
+        seen = front & (u >= 0) & (u < split.width) & (v >= 0) & (v < split.height)
+        n_seen += seen
+        n_out[seen] += ~mask[v[seen], u[seen]]
+    # one view whose outline is incomplete (a pause, a low-contrast edge) must not carve the
+    # object: free space needs the votes of a share of the views that see the point
+    free = n_out >= np.maximum(1, min_votes * n_seen)
+    # a point that (almost) no view sees is not evidence of anything: count it as free
+    free |= n_seen < max(1, int(min_seen * len(views)))
+    # the object sits inside the ring of cameras; beyond the nearest camera centre a point is
+    # only ever seen from the far side, behind the object, and would never be carved
+    nearest = float(np.linalg.norm(split.c2w[:, :3, 3], axis=1).min())
+    free |= np.linalg.norm(points, axis=1) >= nearest
+    return EventHull(~free.reshape(shape), lo, voxel, len(views))
+
+
+def event_hull_crop(
+    split: SplitData,
+    crop: tuple[float, float, float],
+    margin: float = 0.05,
+    resolution: int = 64,
+    step: int | None = None,
+    **silhouette: int,
+) -> tuple[float, float, float] | None:
+    """The crop cylinder ``(r, y_min, y_max)`` shrunk to the event hull plus ``margin``.
+
+    The result never exceeds ``crop``. ``None`` when the events outline nothing inside the
+    crop (no view had firing pixels, or the hull is empty), so the caller keeps ``crop``.
+    ``step``: use every step-th view; default about 160 views in all. ``silhouette`` takes
+    :func:`event_silhouettes`'s ``window`` and ``dilate``.
+    """
+    r, y0, y1 = (float(c) for c in crop)
+    step = step if step is not None else max(1, split.n_views // 160)
+    hull = event_hull(split, (-r, y0, -r), (r, y1, r), resolution, step=step, **silhouette)
+    if hull.n_views == 0:
+        return None
+    idx = np.argwhere(hull.occupied)
+    pts = hull.origin + hull.voxel * idx
+    inside = pts[:, 0] ** 2 + pts[:, 2] ** 2 <= r * r
+    if not inside.any():
+        return None
+    pts = pts[inside]
+    pad = margin + hull.voxel  # a voxel: the grid only samples the hull
+    radius = min(r, float(np.sqrt(pts[:, 0] ** 2 + pts[:, 2] ** 2).max()) + pad)
+    return radius, max(y0, float(pts[:, 1].min()) - pad), min(y1, float(pts[:, 1].max()) + pad)

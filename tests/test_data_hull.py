@@ -1,0 +1,85 @@
+"""The events' visual hull: projection, silhouettes and the crop it gives."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import trimesh
+
+from hybridneus.data import load_dataset
+from hybridneus.data.hull import event_hull_crop, event_silhouettes, project_to_pixels
+from hybridneus.data.rays import camera_rays
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    from hybridneus.simulate import SimulationConfig, simulate_dataset
+
+    root = tmp_path_factory.mktemp("hull") / "device"
+    cfg = SimulationConfig(n_views=60, width=64, height=48, val_views=0, test_views=0,
+                           revolutions=2.0, supersample=1)
+    simulate_dataset("builtin:device", root, cfg)
+    return root
+
+
+@pytest.mark.parametrize("distortion", [(0.0, 0.0), (-0.2, 0.05)])
+def test_projection_inverts_camera_rays(scene, distortion):
+    split = load_dataset(scene)["train"]
+    split = dataclasses.replace(split, distortion=np.tile(distortion, (split.n_views, 1)))
+    xy = np.stack(np.meshgrid(np.arange(0, 64, 7), np.arange(0, 48, 5)), -1).reshape(-1, 2)
+    origins, dirs = camera_rays(split.intrinsics[5], split.distortion[5], split.c2w[5], xy)
+    points = (origins + 0.7 * dirs).numpy().astype(np.float64)
+    u, v, front = project_to_pixels(split, 5, points)
+    assert front.all()
+    np.testing.assert_array_equal(np.stack([u, v], 1), xy)
+
+
+def test_silhouettes_cover_the_object_and_leave_the_background(scene):
+    split = load_dataset(scene)["train"]
+    views, masks = event_silhouettes(split, window=1, dilate=0, step=10)
+    assert len(views) >= 5
+    fill = np.mean([m.mean() for m in masks])
+    assert 0.02 < fill < 0.9  # an outline of the object, not the whole image
+
+
+def test_event_hull_crop_holds_the_object_and_shrinks_a_loose_crop(scene):
+    split = load_dataset(scene)["train"]
+    v = trimesh.load(scene / "gt_mesh.ply", force="mesh").vertices
+    r, y0, y1 = event_hull_crop(split, (1.0, -1.0, 1.0))
+    assert np.hypot(v[:, 0], v[:, 2]).max() <= r
+    assert y0 <= v[:, 1].min() and v[:, 1].max() <= y1
+    assert r < 0.8 and y1 - y0 < 1.5  # far tighter than the whole volume
+    # it never grows a crop that is already tight
+    tight = (0.3, -0.2, 0.25)
+    got = event_hull_crop(split, tight)
+    assert got[0] <= 0.3 and got[1] >= -0.2 and got[2] <= 0.25
+
+
+def test_fit_config_records_the_event_crop_unless_a_crop_is_set(scene, tmp_path):
+    import json
+    import shutil
+
+    from hybridneus.api import load_training_data
+    from hybridneus.config import apply_overrides, preset_config
+
+    loose = tmp_path / "device"  # the scene without its crop: the nerf group's whole volume
+    shutil.copytree(scene, loose)
+    meta = json.loads((loose / "scene.json").read_text())
+    for key in ("crop_r", "crop_y_min", "crop_y_max"):
+        meta["preset"].pop(key)
+    (loose / "scene.json").write_text(json.dumps(meta))
+    assert load_dataset(loose).preset.crop_r == 1.0
+
+    cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=true",
+                                                  "data.crop_y_min=-0.9"])
+    data = load_training_data(cfg, loose)
+    assert (cfg.data.crop_r, data.preset.crop_r) == (None, 1.0)  # the user's crop wins
+    cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=false"])
+    assert load_training_data(cfg, loose).preset.crop_r == 1.0
+    cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=true"])
+    data = load_training_data(cfg, loose)
+    assert cfg.data.crop_r is not None and data.preset.crop_r == cfg.data.crop_r < 0.8
+    assert data.preset.crop_y_min == cfg.data.crop_y_min > -1.0
+    assert any("visual hull" in note for note in data.notes)
