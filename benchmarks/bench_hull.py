@@ -1,16 +1,14 @@
 """How much of a fit's error lies outside the visual hull of the event silhouettes.
 
-An experiment, not a feature: for each training view it takes the pixels that fired any event
-within ``--window`` views of it, fills their convex hull (grown by ``--dilate`` pixels), and
-carves every voxel of the run's crop box that projects outside that hull in some view. The
+An experiment: with :func:`hybridneus.data.hull.event_hull` (per training view, the filled
+convex hull of the pixels that fired within ``--window`` views, grown by ``--dilate`` pixels)
+it carves every voxel of the run's crop box that projects outside that hull in any view (the
+strictest form; ``data.crop_from_events`` only takes a bounding cylinder of a voted hull). The
 trained field is then meshed as the suite does (``extract_mesh(field, res)``) three ways: as
 it is; with the crop's cap trimmed (``PostprocessOptions(trim_crop=True)``, the same grid);
 and cut by the hull (``max(sdf, hull_sdf)``). All are scored against the ground truth. It
 also reports the share of ground-truth surface points that fall outside the hull, i.e. how
 much true surface such a cut would remove.
-
-Every view's camera is assumed to look at the object from outside its convex hull, and the
-background to fire no events (noise-free data); a noisy sensor only makes the hull larger.
 
     python benchmarks/bench_hull.py RUN [RUN ...] [--window 1 --dilate 1 --step 3]
 
@@ -32,69 +30,21 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 
-def event_hull_masks(split, window: int, dilate: int, step: int) -> tuple[list[int], list]:
-    """(view indices, boolean (H, W) masks): the filled convex hull of the pixels that fired
-    within ``window`` views of each ``step``-th view, grown by ``dilate`` pixels."""
-    import cv2
-
-    from hybridneus.data.windows import EventCounter
-
-    w, h = split.width, split.height
-    counter = EventCounter(split.events, w, h)
-    t, times = split.events.t, split.view_times
-    views, masks = [], []
-    for i in range(window, split.n_views - window, step):
-        a = int(np.searchsorted(t, times[i - window], side="left"))
-        b = int(np.searchsorted(t, times[i + window], side="right"))
-        fired = counter.counts(a, b).sum(axis=1).reshape(h, w) > 0
-        ys, xs = np.nonzero(fired)
-        mask = np.zeros((h, w), np.uint8)
-        if xs.size >= 3:
-            cv2.fillConvexPoly(mask, cv2.convexHull(np.stack([xs, ys], 1).astype(np.int32)), 1)
-            if dilate:
-                mask = cv2.dilate(mask, np.ones((2 * dilate + 1,) * 2, np.uint8))
-        views.append(i)
-        masks.append(mask.astype(bool))
-    return views, masks
-
-
-def project(split, i: int, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Integer pixel (column, row) of ``points`` in view ``i`` and whether it is in front."""
-    c2w = split.c2w[i]
-    cam = (points - c2w[:3, 3]) @ c2w[:3, :3]
-    z = cam[:, 2]
-    xn = cam[:, :2] / np.where(np.abs(z) < 1e-9, 1e-9, z)[:, None]
-    k1, k2 = split.distortion[i]
-    if k1 or k2:  # the reader divides distorted coordinates by 1 + k1 r^2 + k2 r^4: invert it
-        xd = xn.copy()
-        for _ in range(5):
-            r2 = (xd**2).sum(axis=1, keepdims=True)
-            xd = xn * (1.0 + k1 * r2 + k2 * r2 * r2)
-        xn = xd
-    K = split.intrinsics[i]
-    u = K[0, 0] * xn[:, 0] + K[0, 1] * xn[:, 1] + K[0, 2] - 0.5
-    v = K[1, 1] * xn[:, 1] + K[1, 2] - 0.5
-    return np.round(u).astype(np.int64), np.round(v).astype(np.int64), z > 0
-
-
-def hull_sdf_grid(split, views, masks, lo: np.ndarray, hi: np.ndarray, n: int):
-    """Signed distance (world units, negative inside) to the carved hull on a grid over
-    [lo, hi] with ``n`` points on the longest side -> (grid (nx, ny, nz), voxel)."""
+def hull_sdf_grid(split, lo: np.ndarray, hi: np.ndarray, args):
+    """Signed distance (world units, negative inside) to the event hull on a grid over
+    [lo, hi] with ``args.hull_res`` points on the longest side -> (grid (nx, ny, nz), voxel).
+    A voxel is carved when any view sees it outside its silhouette (the strictest hull)."""
     from scipy import ndimage
 
-    voxel = float((hi - lo).max()) / (n - 1)
-    shape = tuple(int(np.ceil((hi - lo)[k] / voxel)) + 1 for k in range(3))
-    axes = [lo[k] + voxel * np.arange(shape[k]) for k in range(3)]
-    points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    carved = np.zeros(points.shape[0], dtype=bool)
-    for i, mask in zip(views, masks, strict=True):
-        u, v, front = project(split, i, points)
-        seen = front & (u >= 0) & (u < split.width) & (v >= 0) & (v < split.height)
-        carved[seen] |= ~mask[v[seen], u[seen]]
-    inside = ~carved.reshape(shape)
+    from hybridneus.data.hull import event_hull
+
+    hull = event_hull(split, lo, hi, args.hull_res, window=args.window, dilate=args.dilate,
+                      step=args.step, min_seen=0.0, min_votes=1e-9)
+    inside, voxel = hull.occupied, hull.voxel
     out = ndimage.distance_transform_edt(~inside) * voxel
     into = ndimage.distance_transform_edt(inside) * voxel
-    return np.where(inside, 0.5 * voxel - into, out - 0.5 * voxel).astype(np.float32), voxel
+    sdf = np.where(inside, 0.5 * voxel - into, out - 0.5 * voxel).astype(np.float32)
+    return sdf, voxel, hull.n_views
 
 
 class HullCutField:
@@ -168,19 +118,17 @@ def score_run(run: Path, args) -> dict:
     split = load_dataset(data)["train"]
     gt = trimesh.load(data / "gt_mesh.ply", force="mesh")
     t0 = time.perf_counter()
-    views, masks = event_hull_masks(split, args.window, args.dilate, args.step)
     field = load_field(run, device="cpu")
     r, y0, y1 = (float(v) for v in field.crop)
     lo = np.array([-r, y0, -r]) - 0.02
     hi = np.array([r, y1, r]) + 0.02
-    grid, voxel = hull_sdf_grid(split, views, masks, lo, hi, args.hull_res)
+    grid, voxel, n_views = hull_sdf_grid(split, lo, hi, args)
     cut = HullCutField(field, grid, lo, voxel)
     hull_s = time.perf_counter() - t0
 
     out = {"run": str(run), "scene": data.name.split("-")[0], "window": args.window,
            "dilate": args.dilate, "step": args.step, "hull_res": args.hull_res,
-           "hull_views": len(views), "hull_fill": float(np.mean([m.mean() for m in masks])),
-           "hull_s": round(hull_s, 1)}
+           "hull_views": n_views, "hull_s": round(hull_s, 1)}
     meshes = []
     trim = {"bounds": DEFAULT_BOUNDS, "crop": CropVolume(r, y0, y1),
             "postprocess": PostprocessOptions(trim_crop=True)}

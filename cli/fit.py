@@ -2,10 +2,22 @@
 
 from __future__ import annotations
 
+import logging
+import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
+
+
+class _StderrLines(logging.Handler):
+    """Each record as one plain line on whatever ``sys.stderr`` is when it is emitted."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            sys.stderr.write(self.format(record) + "\n")
+        except Exception:  # noqa: BLE001 - logging must never raise into the caller
+            self.handleError(record)
 
 
 def fit(
@@ -58,7 +70,6 @@ def fit(
     the mesh of runs/latest.
     """
     import os
-    import sys
 
     # Transparent huge pages for PyTorch's CPU allocator: large fresh buffers fault in much
     # faster (measured in docs/anchors); must be set before torch is first imported.
@@ -89,6 +100,11 @@ def fit(
         cfg = load_config(config)
     else:
         cfg = preset_config(preset)
+    if not quiet:  # the library's progress notes (e.g. the crop from the events) on stderr
+        logger = logging.getLogger("hybridneus")
+        if not any(isinstance(h, _StderrLines) for h in logger.handlers):
+            logger.addHandler(_StderrLines())
+        logger.setLevel(logging.INFO)
     field = api_fit(
         data,
         cfg,

@@ -73,8 +73,13 @@ def _crop_from_events(cfg: Config, dataset: Any, crop_keys: tuple[str, ...]) -> 
 
     p = dataset.preset
     crop = (p.crop_r, p.crop_y_min, p.crop_y_max)
+    log = logging.getLogger("hybridneus")
+    log.info("crop: outlining the object from the events (data.crop_from_events) ...")
     tight = event_hull_crop(dataset[cfg.data.split], crop)
     if tight is None or all(abs(a - b) < 1e-6 for a, b in zip(tight, crop, strict=True)):
+        why = "the events outline nothing" if tight is None else "it is inside the events' hull"
+        log.info(f"crop: keeping the preset's (r {p.crop_r:g}, y {p.crop_y_min:g} .. "
+                 f"{p.crop_y_max:g}): {why}")
         return dataset
     for key, value in zip(crop_keys, tight, strict=True):
         setattr(cfg.data, key, round(float(value), 4))
@@ -84,7 +89,7 @@ def _crop_from_events(cfg: Config, dataset: Any, crop_keys: tuple[str, ...]) -> 
     msg = (f"crop from the events' visual hull: r {values['crop_r']}, y {values['crop_y_min']}"
            f" .. {values['crop_y_max']} (preset: r {p.crop_r:g}, y {p.crop_y_min:g} .. "
            f"{p.crop_y_max:g}; data.crop_from_events=false keeps the preset's)")
-    logging.getLogger("hybridneus").info(msg)
+    log.info(msg)
     dataset.notes = [*dataset.notes, msg]
     return dataset
 

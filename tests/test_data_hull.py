@@ -57,20 +57,26 @@ def test_event_hull_crop_holds_the_object_and_shrinks_a_loose_crop(scene):
     assert got[0] <= 0.3 and got[1] >= -0.2 and got[2] <= 0.25
 
 
-def test_fit_config_records_the_event_crop_unless_a_crop_is_set(scene, tmp_path):
+def _without_crop(scene, tmp_path):
+    """A copy of ``scene`` whose scene.json names no crop: the nerf group's whole volume."""
     import json
     import shutil
 
-    from hybridneus.api import load_training_data
-    from hybridneus.config import apply_overrides, preset_config
-
-    loose = tmp_path / "device"  # the scene without its crop: the nerf group's whole volume
+    loose = tmp_path / "device"
     shutil.copytree(scene, loose)
     meta = json.loads((loose / "scene.json").read_text())
     for key in ("crop_r", "crop_y_min", "crop_y_max"):
         meta["preset"].pop(key)
     (loose / "scene.json").write_text(json.dumps(meta))
     assert load_dataset(loose).preset.crop_r == 1.0
+    return loose
+
+
+def test_fit_config_records_the_event_crop_unless_a_crop_is_set(scene, tmp_path):
+    from hybridneus.api import load_training_data
+    from hybridneus.config import apply_overrides, preset_config
+
+    loose = _without_crop(scene, tmp_path)
 
     cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=true",
                                                   "data.crop_y_min=-0.9"])
@@ -78,8 +84,22 @@ def test_fit_config_records_the_event_crop_unless_a_crop_is_set(scene, tmp_path)
     assert (cfg.data.crop_r, data.preset.crop_r) == (None, 1.0)  # the user's crop wins
     cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=false"])
     assert load_training_data(cfg, loose).preset.crop_r == 1.0
-    cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=true"])
+    cfg = preset_config("fast")  # on by default
     data = load_training_data(cfg, loose)
     assert cfg.data.crop_r is not None and data.preset.crop_r == cfg.data.crop_r < 0.8
     assert data.preset.crop_y_min == cfg.data.crop_y_min > -1.0
     assert any("visual hull" in note for note in data.notes)
+
+
+def test_cli_fit_says_which_crop_it_took(scene, tmp_path):
+    import subprocess
+    import sys
+
+    loose = _without_crop(scene, tmp_path)
+    proc = subprocess.run(
+        [sys.executable, "-m", "hybridneus.cli.app", "fit", str(loose), "--iters", "1",
+         "--device", "cpu", "--out", str(tmp_path / "runs"), "--set", "train.n_rays=32"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "crop from the events' visual hull: r 0." in proc.stderr
