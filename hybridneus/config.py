@@ -138,8 +138,7 @@ class DataConfig:
     crop_y_min: float | None = None  # crop-cylinder bottom
     crop_y_max: float | None = None  # crop-cylinder top
     background: list[float] | None = None  # RGB in [0, 1] behind the object
-    # shrink the preset's crop to the events' visual hull (plus 0.05) when no crop is set
-    crop_from_events: bool = True
+    crop_from_events: bool = True  # shrink the crop to the events' visual hull (if no crop set)
 
     def overrides(self) -> dict[str, Any]:
         """The preset overrides that are set, as ``{name: value}`` for the data module."""
