@@ -32,6 +32,16 @@ TINY_FIT = [
 TINY_SIZE = (24, 18)  # width, height
 
 
+def simulate_device(out: Path, n_views: int, width: int, height: int, revolutions: float) -> Path:
+    """The built-in ``device`` scene simulated into ``out`` (train split only, no supersampling)."""
+    from hybridneus.simulate import SimulationConfig, simulate_dataset
+
+    cfg = SimulationConfig(n_views=n_views, width=width, height=height, val_views=0,
+                           test_views=0, revolutions=revolutions, supersample=1)
+    simulate_dataset("builtin:device", out, cfg)
+    return out
+
+
 @pytest.fixture(scope="session")
 def tiny_scene(tmp_path_factory) -> Path:
     """A folder holding ``device/`` (8 training + 3 test views at 24x18, simulated from the

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 import trimesh
+from conftest import simulate_device
 
 from hybridneus.data import load_dataset
 from hybridneus.data.hull import event_hull_crop, event_silhouettes, project_to_pixels
@@ -15,13 +16,7 @@ from hybridneus.data.rays import camera_rays
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    from hybridneus.simulate import SimulationConfig, simulate_dataset
-
-    root = tmp_path_factory.mktemp("hull") / "device"
-    cfg = SimulationConfig(n_views=60, width=64, height=48, val_views=0, test_views=0,
-                           revolutions=2.0, supersample=1)
-    simulate_dataset("builtin:device", root, cfg)
-    return root
+    return simulate_device(tmp_path_factory.mktemp("hull") / "device", 60, 64, 48, 2.0)
 
 
 @pytest.mark.parametrize("distortion", [(0.0, 0.0), (-0.2, 0.05)])

@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+from conftest import simulate_device
 
 from hybridneus.api import fit, prepare
 from hybridneus.config import apply_overrides, preset_config
@@ -36,13 +37,7 @@ TINY = [
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    from hybridneus.simulate import SimulationConfig, simulate_dataset
-
-    out = tmp_path_factory.mktemp("data") / "device"
-    cfg = SimulationConfig(n_views=40, width=48, height=36, val_views=0, test_views=0,
-                           revolutions=1.5, supersample=1)
-    simulate_dataset("builtin:device", out, cfg)
-    return out
+    return simulate_device(tmp_path_factory.mktemp("data") / "device", 40, 48, 36, 1.5)
 
 
 def tiny(*extra: str):
