@@ -35,8 +35,9 @@ def load_training_data(cfg: Config, dataset: Any = None):
     """Load ``dataset`` (path or EventDataset) with the config's preset overrides.
 
     With ``data.crop_from_events`` and no crop set in the config, the preset's crop is shrunk
-    to the events' visual hull (:func:`hybridneus.data.hull.event_hull_crop`) and written into
-    ``cfg.data`` (so the run's config records it and a resume reuses it).
+    to the events' visual hull (:func:`hybridneus.data.hull.event_hull_crop`); the crop taken
+    (shrunk or kept) is written into ``cfg.data``, so the run's config records it and a
+    resume reuses it instead of outlining the object again.
     """
     from hybridneus.data import EventDataset, load_dataset
     from hybridneus.data import apply_overrides as preset_overrides
@@ -80,6 +81,9 @@ def _crop_from_events(cfg: Config, dataset: Any, crop_keys: tuple[str, ...]) -> 
         why = "the events outline nothing" if tight is None else "it is inside the events' hull"
         log.info(f"crop: keeping the preset's (r {p.crop_r:g}, y {p.crop_y_min:g} .. "
                  f"{p.crop_y_max:g}): {why}")
+        # recorded all the same, so that a resume does not outline the object again
+        for key, value in zip(crop_keys, crop, strict=True):
+            setattr(cfg.data, key, float(value))
         return dataset
     for key, value in zip(crop_keys, tight, strict=True):
         setattr(cfg.data, key, round(float(value), 4))

@@ -84,6 +84,11 @@ def test_fit_config_records_the_event_crop_unless_a_crop_is_set(scene, tmp_path)
     assert cfg.data.crop_r is not None and data.preset.crop_r == cfg.data.crop_r < 0.8
     assert data.preset.crop_y_min == cfg.data.crop_y_min > -1.0
     assert any("visual hull" in note for note in data.notes)
+    # a crop the hull does not shrink is recorded too, so a resume need not outline again
+    cfg = preset_config("fast")
+    kept = load_training_data(cfg, scene).preset
+    assert (cfg.data.crop_r, cfg.data.crop_y_min, cfg.data.crop_y_max) == (
+        kept.crop_r, kept.crop_y_min, kept.crop_y_max)
 
 
 def test_cli_fit_says_which_crop_it_took(scene, tmp_path):

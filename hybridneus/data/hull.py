@@ -36,10 +36,10 @@ def event_silhouettes(
     pixels. Views with fewer than three firing pixels are skipped (nothing to outline)."""
     import cv2
 
-    from hybridneus.data.windows import EventCounter
+    from hybridneus.data.windows import event_counter
 
     w, h = split.width, split.height
-    counter = EventCounter(split.events, w, h)
+    counter = event_counter(split)  # shared with training's event frames
     t, times = split.events.t, split.view_times
     views, masks = [], []
     kernel = np.ones((2 * dilate + 1,) * 2, np.uint8) if dilate > 0 else None

@@ -89,7 +89,8 @@ class EventCounter:
         return c.reshape(-1, 2)
 
 
-def _counter(split: SplitData) -> EventCounter:
+def event_counter(split: SplitData) -> EventCounter:
+    """The split's :class:`EventCounter`, built once and kept in ``split.events.cache``."""
     key = ("counter", split.width, split.height)
     counter = split.events.cache.get(key)
     if counter is None:
@@ -125,7 +126,7 @@ def event_frame(
     """
     if t0 < -split.t_max:
         raise ValueError(f"event_frame: t0={t0} is more than one loop (T={split.t_max}) back")
-    counter = _counter(split)
+    counter = event_counter(split)
     c = None
     for i0, i1 in _index_ranges(split.events.t, t0, t1):
         part = counter.counts(i0, i1)
