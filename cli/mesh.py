@@ -54,6 +54,13 @@ def mesh(
             help="Drop the cap the crop cylinder puts on matter that reaches it (open mesh).",
         ),
     ] = False,
+    remove_cavities: Annotated[
+        bool,
+        typer.Option(
+            "--remove-cavities/--keep-cavities",
+            help="Drop closed inner walls of hollows enclosed by matter (never seen by a camera).",
+        ),
+    ] = True,
     chunk: Annotated[int, typer.Option("--chunk", help="Points per field query.")] = 2**18,
     preview: Annotated[
         bool, typer.Option("--preview/--no-preview", help="Write a PNG preview.")
@@ -91,6 +98,7 @@ def mesh(
         min_component_diameter=min_component or None,
         min_component_faces=min_component_faces or None,
         keep_largest=keep_largest,
+        remove_cavities=remove_cavities,
         decimate=decimate or None,
         trim_crop=trim_crop,
     )

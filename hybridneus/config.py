@@ -108,6 +108,8 @@ class TrainConfig:
     n_rays: int = 256  # pixels per step, each rendered at the window's start and end pose
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)
+    inv_s_floor: float = 0.0  # lowest inv_s allowed by inv_s_floor_at (0: no floor)
+    inv_s_floor_at: float = 0.5  # fraction of training at which the floor reaches inv_s_floor
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
     warmup: int = 50  # linear learning-rate warm-up steps

@@ -206,6 +206,48 @@ def test_postprocess_removes_a_small_floater():
     assert len(by_faces.split(only_watertight=False)) == 1
 
 
+class _HollowBall(SphereField):
+    """A ball of radius 0.5 with a closed hollow of radius 0.25 inside."""
+
+    def _sdf(self, points: torch.Tensor) -> torch.Tensor:
+        r = torch.linalg.vector_norm(points, dim=-1)
+        return torch.maximum(r - 0.5, 0.25 - r)
+
+
+def test_postprocess_removes_closed_cavities_only():
+    field = _HollowBall()
+    raw = extract_mesh(field, res=64, postprocess=RAW, progress=False)
+    assert len(raw.split(only_watertight=False)) == 2
+    cleaned = extract_mesh(field, res=64, progress=False)
+    radii = np.linalg.norm(cleaned.vertices, axis=1)
+    assert len(cleaned.split(only_watertight=False)) == 1 and radii.min() > 0.45
+    kept = extract_mesh(
+        field, res=64, postprocess=PostprocessOptions(remove_cavities=False), progress=False
+    )
+    assert len(kept.split(only_watertight=False)) == 2
+    # two solid balls are two bodies, not a body and a hollow
+    pair = UnionField(SphereField(0.3, center=(-0.4, 0, 0)), SphereField(0.3, center=(0.4, 0, 0)))
+    assert len(extract_mesh(pair, res=64, progress=False).split(only_watertight=False)) == 2
+
+
+def test_remove_cavities_keeps_open_and_outward_components():
+    import trimesh
+
+    from hybridneus.meshing.postprocess import remove_cavities
+
+    outer = trimesh.creation.icosphere(3, radius=1.0)
+    inner = trimesh.creation.icosphere(2, radius=0.5)
+    inner.invert()
+    closed = trimesh.util.concatenate([outer, inner])
+    closed.visual.vertex_colors = np.tile([10, 20, 30, 255], (len(closed.vertices), 1))
+    out = remove_cavities(closed)
+    assert len(out.faces) == len(outer.faces) and out.volume > 0
+    assert (np.asarray(out.visual.vertex_colors)[:, :3] == [10, 20, 30]).all()
+    opened = trimesh.Trimesh(inner.vertices, inner.faces[1:], process=False)
+    both = trimesh.util.concatenate([outer, opened])
+    assert len(remove_cavities(both).faces) == len(both.faces)
+
+
 def test_decimation_reaches_the_target_and_keeps_colours():
     field = SphereField(0.5)
     mesh = extract_mesh(

@@ -56,19 +56,21 @@ def test_mesh_options_and_errors(runs, tmp_path, cli, monkeypatch):
     assert code == 2 and "no run" in err
 
 
-def test_trim_crop_flag_reaches_the_postprocessing(runs, tmp_path, cli, monkeypatch):
+def test_postprocess_flags_reach_the_postprocessing(runs, tmp_path, cli, monkeypatch):
     import hybridneus.meshing.extract as extract
 
     seen = []
     real = extract.extract_mesh
 
     def spy(*args, **kwargs):
-        seen.append(kwargs["postprocess"].trim_crop)
+        options = kwargs["postprocess"]
+        seen.append((options.trim_crop, options.remove_cavities))
         return real(*args, **kwargs)
 
     monkeypatch.setattr(extract, "extract_mesh", spy)
-    for flag in ("--trim-crop", "--keep-crop-cap"):
-        code, err = cli(str(runs), "--res", "32", "--out", str(tmp_path / f"{flag}.ply"),
-                        "--no-preview", "--device", "cpu", flag)
+    for flags in ([], ["--trim-crop"], ["--keep-crop-cap", "--keep-cavities"],
+                  ["--remove-cavities"]):
+        code, err = cli(str(runs), "--res", "32", "--out", str(tmp_path / f"{len(seen)}.ply"),
+                        "--no-preview", "--device", "cpu", *flags)
         assert code == 0, err
-    assert seen == [True, False]
+    assert seen == [(False, True), (True, True), (False, False), (False, True)]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 
@@ -200,6 +201,41 @@ def test_fixed_s_opacity_equals_the_opacity_and_sends_no_gradient_to_the_sharpne
     assert grad is None or float(grad.abs().sum()) == 0.0
     assert render_rays(trainer.field, batch.origins1, batch.dirs1, trainer.sampler, None,
                        True).opacity_fixed_s is None
+
+
+def test_inv_s_floor_grows_geometrically_then_holds():
+    from hybridneus.training.trainer import inv_s_floor
+
+    assert inv_s_floor(0, 100, 20.0, 200.0, 0.5) == pytest.approx(20.0)
+    assert inv_s_floor(25, 100, 20.0, 200.0, 0.5) == pytest.approx(math.sqrt(20.0 * 200.0))
+    assert inv_s_floor(50, 100, 20.0, 200.0, 0.5) == pytest.approx(200.0)
+    assert inv_s_floor(90, 100, 20.0, 200.0, 0.5) == pytest.approx(200.0)
+    assert inv_s_floor(10, 100, 20.0, 0.0, 0.5) == 0.0
+    assert inv_s_floor(10, 100, 20.0, 5.0, 0.5) == 5.0
+
+
+def test_inv_s_floor_holds_the_sharpness_up_and_lets_it_rise(scene):
+    """With the sharpness's own learning rate at zero only the floor can move it: it must
+    follow the schedule; with its learning rate on, the floor is a bound, not a value."""
+    from hybridneus.training.trainer import inv_s_floor
+
+    cfg = tiny("train.iters=20", "train.lr_variance=0.0", "train.inv_s_floor=400",
+               "train.inv_s_floor_at=0.5")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    start = trainer.field.inv_s().item()
+    seen: list[tuple[int, float]] = []
+    trainer.fit([lambda t, lg: seen.append((t.step, lg["inv_s"]))], progress=False)
+    for step, value in seen:
+        assert value == pytest.approx(inv_s_floor(step - 1, 20, start, 400.0, 0.5), rel=1e-4)
+    assert seen[-1][1] == pytest.approx(400.0, rel=1e-4)
+
+    free = tiny("train.iters=20", "train.lr_variance=0.05", "train.inv_s_floor=30")
+    trainer, _ = prepare(scene, free, device="cpu")
+    values = []
+    trainer.fit([lambda t, lg: values.append(lg["inv_s"])], progress=False)
+    floors = [inv_s_floor(i, 20, start, 30.0, 0.5) for i in range(20)]
+    assert all(v >= f * (1 - 1e-5) for v, f in zip(values, floors, strict=True))
+    assert max(values) > 30.0 * 1.05
 
 
 @pytest.mark.slow

@@ -7,8 +7,10 @@ Order (each step optional, see :class:`PostprocessOptions`):
     3. repair non-manifold edges (by removing faces) and vertices (by splitting);
     4. remove connected components smaller than ``min_component_diameter`` (fraction of the
        whole mesh's bounding-box diagonal) and/or with fewer than ``min_component_faces`` faces;
-    5. ``keep_largest``: keep only the component with the most faces;
-    6. quadric edge-collapse decimation to ``decimate`` faces.
+    5. ``remove_cavities``: drop closed components that face inwards (the walls of hollows
+       inside matter, which no camera can see);
+    6. ``keep_largest``: keep only the component with the most faces;
+    7. quadric edge-collapse decimation to ``decimate`` faces.
 Vertex colours (``mesh.visual.vertex_colors``) survive every step.
 """
 
@@ -34,6 +36,8 @@ class PostprocessOptions:
         min_component_diameter: drop components whose bounding-box diagonal is below this
             fraction of the whole mesh's diagonal (0.05 = 5%); None or 0 disables.
         min_component_faces: drop components with fewer faces; None or 0 disables.
+        remove_cavities: drop closed components with negative signed volume: the inner
+            walls of hollows enclosed by matter (see :func:`remove_cavities`).
         keep_largest: keep only the connected component with the most faces.
         decimate: target face count for quadric decimation; None disables.
         clip: crop cylinder to clip the mesh to; None disables.
@@ -54,6 +58,7 @@ class PostprocessOptions:
     repair_non_manifold: bool = True
     min_component_diameter: float | None = 0.05
     min_component_faces: int | None = None
+    remove_cavities: bool = True
     keep_largest: bool = False
     decimate: int | None = None
     clip: CropVolume | None = None
@@ -154,6 +159,36 @@ def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return labels[faces[:, 0]]
 
 
+def remove_cavities(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Drop the closed components whose faces point inwards (negative signed volume).
+
+    Marching cubes orients faces from matter (SDF < 0) towards free space, so a closed
+    component encloses matter when its signed volume is positive and encloses a hollow in
+    matter when it is negative. No camera sees into a closed hollow; a trained field can
+    still leave one where the data say nothing (an event-poor, uniformly coloured interior),
+    and its wall then counts as surface. Open components (cut by a clip or trim) are kept,
+    since their volume has no sign. Colours are kept.
+    """
+    faces = np.asarray(mesh.faces)
+    if faces.shape[0] == 0:
+        return mesh
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    labels = face_components(faces, vertices.shape[0])
+    tri = vertices[faces]
+    volume = np.bincount(
+        labels, weights=np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
+    )
+    _, edge_index, edge_count = np.unique(
+        np.asarray(mesh.edges_sorted), axis=0, return_inverse=True, return_counts=True
+    )
+    open_edge = edge_count[edge_index.reshape(-1)] != 2
+    is_open = np.bincount(labels[np.asarray(mesh.edges_face)[open_edge]], minlength=volume.size)
+    cavity = (volume < 0) & (is_open == 0)
+    if not cavity.any():
+        return mesh
+    return _rebuild(vertices, faces[~cavity[labels]], _vertex_colors(mesh))
+
+
 def keep_largest_component(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """Only the connected component with the most faces (colours kept)."""
     faces = np.asarray(mesh.faces)
@@ -209,6 +244,8 @@ def postprocess_mesh(
         )
     ms.meshing_remove_unreferenced_vertices()
     result = _from_meshset(ms, colors is not None)
+    if options.remove_cavities:
+        result = remove_cavities(result)
     if options.keep_largest:
         result = keep_largest_component(result)
     if options.decimate and len(result.faces) > options.decimate:

@@ -47,6 +47,25 @@ def lr_factor(step: int, total: int, warmup: int, decay_start: float, decay_fina
     return f
 
 
+def inv_s_floor(step: int, total: int, start: float, floor: float, at: float) -> float:
+    """Lowest NeuS sharpness allowed at ``step``: ``start`` at step 0, growing geometrically to
+    ``floor`` at ``at * total`` steps and held there (``floor <= 0`` switches it off: 0.0).
+
+    Args:
+        step: current step.
+        total: total steps.
+        start: the initial sharpness ``exp(10 v_0)``.
+        floor: the final lower bound.
+        at: fraction of ``total`` at which ``floor`` is reached.
+    """
+    if floor <= 0:
+        return 0.0
+    if floor <= start:
+        return floor
+    progress = min(1.0, step / max(at * total, 1.0))
+    return start * (floor / start) ** progress
+
+
 def _make_adam(groups: list[dict[str, Any]], cfg: Config) -> torch.optim.Adam:
     kwargs = dict(betas=tuple(cfg.train.betas), eps=cfg.train.adam_eps)
     try:
@@ -197,6 +216,22 @@ class Trainer:
         self.field.cos_anneal = 1.0 if anneal_at <= 0 else min(1.0, self.step / anneal_at)
         return factor
 
+    def _apply_inv_s_floor(self) -> None:
+        """Keep the learned sharpness on or above the scheduled floor.
+
+        Where events leave geometry ambiguous (grey, event-poor regions, thin parts) the
+        learned sharpness can sink and the fit turn to fog: a thick semi-transparent
+        envelope or tunnels whose zero level is far from the object. Projecting ``v`` up to
+        the floor after each Adam step keeps its gradient, so it can still rise above it.
+        """
+        t = self.cfg.train
+        if t.inv_s_floor <= 0:
+            return
+        start = math.exp(10.0 * self.cfg.field.inv_s_init)
+        floor = inv_s_floor(self.step, self.total_steps, start, t.inv_s_floor, t.inv_s_floor_at)
+        with torch.no_grad():
+            self.field.variance.clamp_(min=math.log(floor) / 10.0)
+
     def _random_points(self, n: int) -> torch.Tensor:
         """Uniform points in the crop box grown by ``loss.random_box_margin``, within [-1, 1]^3."""
         lo, hi = self.aabb[:3], self.aabb[3:]
@@ -295,6 +330,7 @@ class Trainer:
         self.optimizer.zero_grad(set_to_none=True)
         total.backward()
         self.optimizer.step()
+        self._apply_inv_s_floor()
         self.step += 1
         seconds = time.perf_counter() - t_start
         self.elapsed += seconds
