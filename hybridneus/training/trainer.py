@@ -47,12 +47,9 @@ def lr_factor(step: int, total: int, warmup: int, decay_start: float, decay_fina
     return f
 
 
-def inv_s_floor(
-    step: int, total: int, start: float, floor: float, at: float, min_steps: int = 0
-) -> float:
+def inv_s_floor(step: int, total: int, start: float, floor: float, at: float) -> float:
     """Lowest NeuS sharpness allowed at ``step``: ``start`` at step 0, growing geometrically to
-    ``floor`` at ``max(at * total, min_steps)`` steps and held there (``floor <= 0`` switches
-    it off: 0.0).
+    ``floor`` at ``at * total`` steps and held there (``floor <= 0`` switches it off: 0.0).
 
     Args:
         step: current step.
@@ -60,13 +57,12 @@ def inv_s_floor(
         start: the initial sharpness ``exp(10 v_0)``.
         floor: the final lower bound.
         at: fraction of ``total`` at which ``floor`` is reached.
-        min_steps: ``floor`` is not reached before this step.
     """
     if floor <= 0:
         return 0.0
     if floor <= start:
         return floor
-    progress = min(1.0, step / max(at * total, min_steps, 1.0))
+    progress = min(1.0, step / max(at * total, 1.0))
     return start * (floor / start) ** progress
 
 
@@ -227,16 +223,17 @@ class Trainer:
         learned sharpness can sink and the fit turn to fog: a thick semi-transparent
         envelope, or hollows, whose zero level is far from the object. Projecting ``v`` up
         to the floor after each Adam step keeps its gradient, so it can still rise above it.
-        The floor grows from 1, so it leaves the first part of training alone: there the
-        sharpness often dips below its initial value while the surface travels from the
-        initial sphere, and holding it at the initial value instead (a floor grown from there)
-        left a 400-step fit of the test scene further from the truth than its initial sphere.
+        The floor starts at the initial sharpness, so it also stops the early dip below it
+        that a young surface uses to travel from the initial sphere. Grown from there, it
+        fixed the xylophone but left a 400-step fit of the small test scene further from
+        the truth than its initial sphere; grown from 1 (no hold early on), it spared the
+        short fit and did not help the xylophone. That is why it is off by default.
         """
         t = self.cfg.train
         if t.inv_s_floor <= 0:
             return
-        floor = inv_s_floor(self.step, self.total_steps, 1.0, t.inv_s_floor, t.inv_s_floor_at,
-                            t.inv_s_floor_steps)
+        start = math.exp(10.0 * self.cfg.field.inv_s_init)
+        floor = inv_s_floor(self.step, self.total_steps, start, t.inv_s_floor, t.inv_s_floor_at)
         with torch.no_grad():
             self.field.variance.clamp_(min=math.log(floor) / 10.0)
 
