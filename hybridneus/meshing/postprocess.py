@@ -178,10 +178,8 @@ def remove_cavities(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     volume = np.bincount(
         labels, weights=np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
     )
-    _, edge_index, edge_count = np.unique(
-        np.asarray(mesh.edges_sorted), axis=0, return_inverse=True, return_counts=True
-    )
-    open_edge = edge_count[edge_index.reshape(-1)] != 2
+    edge_index = np.asarray(mesh.edges_unique_inverse)  # trimesh's hashed edge ids
+    open_edge = np.bincount(edge_index)[edge_index] != 2
     is_open = np.bincount(labels[np.asarray(mesh.edges_face)[open_edge]], minlength=volume.size)
     cavity = (volume < 0) & (is_open == 0)
     if not cavity.any():
