@@ -108,8 +108,10 @@ class TrainConfig:
     n_rays: int = 256  # pixels per step, each rendered at the window's start and end pose
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)
-    inv_s_floor: float = 0.0  # lowest inv_s allowed by inv_s_floor_at (0: no floor)
+    inv_s_floor: float = 200.0  # lowest inv_s allowed by inv_s_floor_at (0: no floor)
     inv_s_floor_at: float = 0.5  # fraction of training at which the floor reaches inv_s_floor
+    inv_s_floor_min_steps: int = 1500  # ... but not before this step
+    inv_s_floor_delay: int = 100  # steps without a floor at the start
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
     warmup: int = 50  # linear learning-rate warm-up steps
@@ -207,6 +209,7 @@ def _eventneus() -> Config:
     cfg.field.color_position_frequencies = 8
     cfg.train.lr = 5e-4
     cfg.train.lr_variance = 1e-3
+    cfg.train.inv_s_floor = 0.0  # the paper learns s freely
     cfg.train.warmup = 100
     return cfg
 

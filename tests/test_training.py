@@ -212,30 +212,58 @@ def test_inv_s_floor_grows_geometrically_then_holds():
     assert inv_s_floor(90, 100, 20.0, 200.0, 0.5) == pytest.approx(200.0)
     assert inv_s_floor(10, 100, 20.0, 0.0, 0.5) == 0.0
     assert inv_s_floor(10, 100, 20.0, 5.0, 0.5) == 5.0
+    # min_steps stretches a short schedule; a long one (at * total >= min_steps) is unchanged
+    assert inv_s_floor(100, 100, 20.0, 200.0, 0.5, 200) == pytest.approx(math.sqrt(20.0 * 200.0))
+    assert inv_s_floor(200, 100, 20.0, 200.0, 0.5, 200) == pytest.approx(200.0)
+    assert inv_s_floor(25, 100, 20.0, 200.0, 0.5, 40) == inv_s_floor(25, 100, 20.0, 200.0, 0.5)
 
 
 def test_inv_s_floor_holds_the_sharpness_up_and_lets_it_rise(scene):
     """With the sharpness's own learning rate at zero only the floor can move it: it must
-    follow the schedule; with its learning rate on, the floor is a bound, not a value."""
+    stay at its initial value through the delay, then follow the floor; with its learning
+    rate on, the floor is a bound, not a value."""
     from hybridneus.training.trainer import inv_s_floor
 
     cfg = tiny("train.iters=20", "train.lr_variance=0.0", "train.inv_s_floor=400",
-               "train.inv_s_floor_at=0.5")
+               "train.inv_s_floor_at=0.5", "train.inv_s_floor_min_steps=0",
+               "train.inv_s_floor_delay=6")
     trainer, _ = prepare(scene, cfg, device="cpu")
     start = trainer.field.inv_s().item()
     seen: list[tuple[int, float]] = []
     trainer.fit([lambda t, lg: seen.append((t.step, lg["inv_s"]))], progress=False)
     for step, value in seen:
-        assert value == pytest.approx(inv_s_floor(step - 1, 20, start, 400.0, 0.5), rel=1e-4)
+        expected = start if step - 1 < 6 else inv_s_floor(step - 1, 20, start, 400.0, 0.5)
+        assert value == pytest.approx(expected, rel=1e-4)
+    early = [v for step, v in seen if step - 1 < 6]
+    assert early and early == pytest.approx([start] * len(early), rel=1e-6)
     assert seen[-1][1] == pytest.approx(400.0, rel=1e-4)
 
-    free = tiny("train.iters=20", "train.lr_variance=0.05", "train.inv_s_floor=30")
+    free = tiny("train.iters=20", "train.lr_variance=0.05", "train.inv_s_floor=30",
+                "train.inv_s_floor_min_steps=0", "train.inv_s_floor_delay=0")
     trainer, _ = prepare(scene, free, device="cpu")
     values = []
     trainer.fit([lambda t, lg: values.append(lg["inv_s"])], progress=False)
     floors = [inv_s_floor(i, 20, start, 30.0, 0.5) for i in range(20)]
     assert all(v >= f * (1 - 1e-5) for v, f in zip(values, floors, strict=True))
     assert max(values) > 30.0 * 1.05
+
+
+def test_inv_s_floor_min_steps_spares_a_short_fit(scene):
+    """A floor that would reach its value at half of a 20-step fit holds the sharpness up;
+    with min_steps far beyond the fit it stays within 0.1% of the initial sharpness, so the
+    fit is the same as with no floor at all (to within that)."""
+    base = ("train.iters=20", "train.lr_variance=0.0", "train.inv_s_floor=400",
+            "train.inv_s_floor_delay=0")
+    runs = {}
+    for name, extra in {"off": ("train.inv_s_floor=0",),
+                        "short": ("train.inv_s_floor_min_steps=0",),
+                        "spared": ("train.inv_s_floor_min_steps=100000",)}.items():
+        trainer, _ = prepare(scene, tiny(*base, *extra), device="cpu")
+        runs[name] = []
+        trainer.fit([lambda t, lg, seen=runs[name]: seen.append(lg["inv_s"])], progress=False)
+    assert runs["short"][-1] == pytest.approx(400.0, rel=1e-4)
+    assert runs["spared"] == pytest.approx(runs["off"], rel=2e-3)
+    assert max(runs["spared"]) < 1.002 * runs["off"][0]
 
 
 @pytest.mark.slow
