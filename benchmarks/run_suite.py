@@ -280,13 +280,26 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
 # --------------------------------------------------------------------------- driver
 
 
+_COMMIT: str | None = None
+
+
 def _git_commit() -> str:
-    try:
-        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True, check=True)
-        return out.stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+    """HEAD when first asked (the suite asks at start, so a commit made during a fit is not
+    credited with it), with ``+dirty`` if the code had uncommitted changes then."""
+    global _COMMIT
+    if _COMMIT is None:
+        git = ["git", "-C", str(REPO)]
+        try:
+            head = subprocess.run([*git, "rev-parse", "--short", "HEAD"],
+                                  capture_output=True, text=True, check=True).stdout.strip()
+            changed = subprocess.run(
+                [*git, "status", "--porcelain", "--untracked-files=no", "--", "hybridneus",
+                 "grids", "cli", "benchmarks", ":(exclude)benchmarks/results"],
+                capture_output=True, text=True, check=True).stdout.strip()
+            _COMMIT = head + ("+dirty" if changed else "")
+        except (OSError, subprocess.CalledProcessError):
+            _COMMIT = "unknown"
+    return _COMMIT
 
 
 def launch(
@@ -523,6 +536,7 @@ def main() -> None:
                     help="score run folders made with --fit-only (datasets looked up in --cache "
                     "by name) and append them to the results")
     args = ap.parse_args()
+    _git_commit()
 
     if args.score_runs:
         for run_dir in args.score_runs:
