@@ -5,8 +5,9 @@ Samples ``--points`` points on each predicted mesh and ``4 * --points`` on the g
 measures each predicted point's distance to the nearest ground-truth sample, and prints the
 mean of those distances, the share farther than ``--far``, that share's contribution to the
 mean, the mesh's largest components, and a histogram of the far points' y (up) coordinate next
-to the ground truth's y range. Used to tell a filled underside (far points below the object)
-from floaters or an envelope around thin parts.
+to the ground truth's y range. Distances are in the dataset's world units, not the unit cube
+of the Chamfer distance (``hybridneus.evaluation.geometry``). Used to tell a filled underside
+(far points below the object) from floaters or an envelope around thin parts.
 
     python benchmarks/error_by_height.py GT_MESH MESH [MESH ...] [--points 50000 --far 0.03]
 """
@@ -17,11 +18,10 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-import trimesh
 from scipy.spatial import cKDTree
 
 from hybridneus.errors import MeshError
-from hybridneus.meshing.convert import load_mesh
+from hybridneus.evaluation.geometry import as_mesh, sample_surface
 
 
 def main() -> None:
@@ -33,14 +33,13 @@ def main() -> None:
     ap.add_argument("--bins", type=int, default=8)
     args = ap.parse_args()
 
-    gt = load_mesh(args.gt)
-    g = trimesh.sample.sample_surface(gt, 4 * args.points, seed=0)[0]
+    g = sample_surface(as_mesh(args.gt), 4 * args.points, seed=0)
     tree = cKDTree(g)
     lo, hi = float(g[:, 1].min()), float(g[:, 1].max())
     print(f"ground truth y in [{lo:.3f}, {hi:.3f}]")
     for path in args.meshes:
-        mesh = load_mesh(path)
-        p = trimesh.sample.sample_surface(mesh, args.points, seed=0)[0]
+        mesh = as_mesh(path)
+        p = sample_surface(mesh, args.points, seed=1)
         d, _ = tree.query(p)
         far = d > args.far
         parts = sorted((len(c.faces) for c in mesh.split(only_watertight=False)), reverse=True)

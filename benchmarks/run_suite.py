@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import functools
 import json
 import os
 import resource
@@ -280,26 +281,21 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
 # --------------------------------------------------------------------------- driver
 
 
-_COMMIT: str | None = None
-
-
+@functools.cache
 def _git_commit() -> str:
     """HEAD when first asked (the suite asks at start, so a commit made during a fit is not
     credited with it), with ``+dirty`` if the code had uncommitted changes then."""
-    global _COMMIT
-    if _COMMIT is None:
-        git = ["git", "-C", str(REPO)]
-        try:
-            head = subprocess.run([*git, "rev-parse", "--short", "HEAD"],
-                                  capture_output=True, text=True, check=True).stdout.strip()
-            changed = subprocess.run(
-                [*git, "status", "--porcelain", "--untracked-files=no", "--", "hybridneus",
-                 "grids", "cli", "benchmarks", ":(exclude)benchmarks/results"],
-                capture_output=True, text=True, check=True).stdout.strip()
-            _COMMIT = head + ("+dirty" if changed else "")
-        except (OSError, subprocess.CalledProcessError):
-            _COMMIT = "unknown"
-    return _COMMIT
+    git = ["git", "-C", str(REPO)]
+    try:
+        head = subprocess.run([*git, "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+        changed = subprocess.run(
+            [*git, "status", "--porcelain", "--untracked-files=no", "--", "hybridneus",
+             "grids", "cli", "benchmarks", ":(exclude)benchmarks/results"],
+            capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+dirty" if changed else "")
 
 
 def launch(

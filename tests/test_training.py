@@ -216,6 +216,9 @@ def test_inv_s_floor_grows_geometrically_then_holds():
     assert inv_s_floor(100, 100, 20.0, 200.0, 0.5, 200) == pytest.approx(math.sqrt(20.0 * 200.0))
     assert inv_s_floor(200, 100, 20.0, 200.0, 0.5, 200) == pytest.approx(200.0)
     assert inv_s_floor(25, 100, 20.0, 200.0, 0.5, 40) == inv_s_floor(25, 100, 20.0, 200.0, 0.5)
+    # no floor during the delay; after it, the same curve as without one
+    assert inv_s_floor(9, 100, 20.0, 200.0, 0.5, 0, 10) == 0.0
+    assert inv_s_floor(10, 100, 20.0, 200.0, 0.5, 0, 10) == inv_s_floor(10, 100, 20.0, 200.0, 0.5)
 
 
 def test_inv_s_floor_holds_the_sharpness_up_and_lets_it_rise(scene):

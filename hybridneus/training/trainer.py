@@ -48,11 +48,17 @@ def lr_factor(step: int, total: int, warmup: int, decay_start: float, decay_fina
 
 
 def inv_s_floor(
-    step: int, total: int, start: float, floor: float, at: float, min_steps: int = 0
+    step: int,
+    total: int,
+    start: float,
+    floor: float,
+    at: float,
+    min_steps: int = 0,
+    delay: int = 0,
 ) -> float:
-    """Lowest NeuS sharpness allowed at ``step``: ``start`` at step 0, growing geometrically to
-    ``floor`` at ``max(at * total, min_steps)`` steps and held there (``floor <= 0`` switches
-    it off: 0.0).
+    """Lowest NeuS sharpness allowed at ``step``: none (0.0) before ``delay``, then ``start``
+    growing geometrically from step 0 to ``floor`` at ``max(at * total, min_steps)`` steps and
+    held there (``floor <= 0`` switches it off: 0.0).
 
     Args:
         step: current step.
@@ -61,8 +67,9 @@ def inv_s_floor(
         floor: the final lower bound.
         at: fraction of ``total`` at which ``floor`` is reached.
         min_steps: the step before which ``floor`` is not reached, whatever ``total``.
+        delay: steps at the start with no floor.
     """
-    if floor <= 0:
+    if floor <= 0 or step < delay:
         return 0.0
     if floor <= start:
         return floor
@@ -235,13 +242,13 @@ class Trainer:
         freezes it in the wrong place.
         """
         t = self.cfg.train
-        if t.inv_s_floor <= 0 or self.step < t.inv_s_floor_delay:
-            return
         start = math.exp(10.0 * self.cfg.field.inv_s_init)
         floor = inv_s_floor(
             self.step, self.total_steps, start, t.inv_s_floor, t.inv_s_floor_at,
-            t.inv_s_floor_min_steps,
+            t.inv_s_floor_min_steps, t.inv_s_floor_delay,
         )
+        if floor <= 0:
+            return
         with torch.no_grad():
             self.field.variance.clamp_(min=math.log(floor) / 10.0)
 
