@@ -89,6 +89,9 @@ class LossConfig:
     lambda_curvature: float = 0.0  # normal variation at the rendered surface points
     lambda_sparsity: float = 0.0  # exp(-tau |sdf|) on random points in the crop (anti-floater)
     lambda_outside: float = 1.0  # relu(-sdf) at random points outside the crop (no caps there)
+    lambda_hull: float = 1.0  # relu(-sdf) at random points the events' visual hull calls empty
+    hull_resolution: int = 96  # hull grid points along the crop box's longest side
+    hull_grow: int = 1  # hull voxels added around the hull before the rest counts as empty
     sparsity_tau: float = 50.0  # decay of the sparsity term (1/world units)
     lambda_background_matter: float = 0.0  # thin matter that looks like the background
     background_matter_sigma: float = 0.1  # colour distance at which that term fades (exp(-(d/s)^2))
@@ -210,6 +213,7 @@ def _eventneus() -> Config:
     cfg.train.lr = 5e-4
     cfg.train.lr_variance = 1e-3
     cfg.train.inv_s_floor = 0.0  # the paper learns s freely
+    cfg.loss.lambda_hull = 0.0  # the paper has no silhouette prior
     cfg.train.warmup = 100
     return cfg
 

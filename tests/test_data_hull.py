@@ -6,11 +6,19 @@ import dataclasses
 
 import numpy as np
 import pytest
+import torch
 import trimesh
 from conftest import simulate_device
 
 from hybridneus.data import load_dataset
-from hybridneus.data.hull import event_hull_crop, event_silhouettes, project_to_pixels
+from hybridneus.data.hull import (
+    EventHull,
+    FreeSpace,
+    event_free_space,
+    event_hull_crop,
+    event_silhouettes,
+    project_to_pixels,
+)
 from hybridneus.data.rays import camera_rays
 
 
@@ -50,6 +58,33 @@ def test_event_hull_crop_holds_the_object_and_shrinks_a_loose_crop(scene):
     tight = (0.3, -0.2, 0.25)
     got = event_hull_crop(split, tight)
     assert got[0] <= 0.3 and got[1] >= -0.2 and got[2] <= 0.25
+
+
+def test_free_space_spares_the_object_and_frees_the_space_around_it(scene):
+    split = load_dataset(scene)["train"]
+    mesh = trimesh.load(scene / "gt_mesh.ply", force="mesh")
+    lo, hi = mesh.bounds[0] - 0.3, mesh.bounds[1] + 0.3
+    free = event_free_space(split, lo, hi, resolution=48)
+    surface, _ = trimesh.sample.sample_surface(mesh, 3000, seed=0)
+    assert not free.free(torch.tensor(surface, dtype=torch.float32)).any()
+    # a shell 0.2 out from the object is mostly seen against the background somewhere
+    shell = mesh.vertices + 0.2 * mesh.vertex_normals
+    assert free.free(torch.tensor(shell, dtype=torch.float32)).float().mean() > 0.5
+    # outside its grid the hull knows nothing
+    far = torch.tensor([[hi[0] + 0.5, 0.0, 0.0], [0.0, lo[1] - 0.5, 0.0]], dtype=torch.float32)
+    assert not free.free(far).any()
+
+
+def test_free_space_grows_the_hull_by_whole_voxels():
+    occupied = np.zeros((7, 7, 7), bool)
+    occupied[3, 3, 3] = True
+    hull = EventHull(occupied, np.array([-3.0, -3.0, -3.0]), 1.0, 1)
+    assert (~FreeSpace(hull, grow=0).free_grid).sum() == 1
+    free = FreeSpace(hull, grow=1)
+    assert (~free.free_grid).sum() == 27
+    # nearest voxel: 1.4 from the centre rounds to the grown ring, 1.6 to the free one
+    pts = torch.tensor([[1.4, 0.0, 0.0], [1.6, 0.0, 0.0], [0.0, -1.4, 1.4]])
+    assert free.free(pts).tolist() == [False, True, False]
 
 
 def _without_crop(scene, tmp_path):

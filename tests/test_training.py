@@ -269,6 +269,27 @@ def test_inv_s_floor_min_steps_spares_a_short_fit(scene):
     assert max(runs["spared"]) < 1.002 * runs["off"][0]
 
 
+def test_hull_term_empties_the_space_the_event_hull_calls_free(scene):
+    """The initial sphere fills space that no event rules out but the event silhouettes
+    call empty; the hull term pushes the SDF there positive."""
+    trainers = {}
+    for lam in ("0", "1"):
+        trainer, _ = prepare(scene, tiny("train.iters=40", f"loss.lambda_hull={lam}"),
+                             device="cpu")
+        trainer.fit(progress=False)
+        trainers[lam] = trainer
+    assert trainers["0"].free_space is None
+    pts = trainers["1"]._random_points(20000)
+    free = trainers["1"].free_space.free(pts)
+    assert free.float().mean() > 0.1
+    share = {}
+    for lam, trainer in trainers.items():
+        with torch.no_grad():
+            share[lam] = float((trainer.field.sdf(pts[free]) < 0).float().mean())
+    assert share["0"] > 0.05
+    assert share["1"] < 0.5 * share["0"]
+
+
 @pytest.mark.slow
 def test_fit_moves_the_zero_level_towards_the_true_surface(tmp_path_factory):
     """400 steps on a 64x48, 80-view scene beat the initial sphere's Chamfer (issue criterion)."""

@@ -5,8 +5,9 @@ fired within ``window`` views of it outline the object's image (its silhouette e
 the camera does); their filled convex hull, grown by ``dilate`` pixels, contains the object's
 image. A point that projects inside the image but outside that hull in any view is free
 space. The hull is conservative (convex per view, dilated, sensor noise only grows it) and
-cannot see into concavities; it is used to tighten the scene's crop cylinder
-(:func:`event_hull_crop`), never to cut the surface.
+cannot see into concavities. It tightens the scene's crop cylinder (:func:`event_hull_crop`)
+and, during training, tells the field where there is no matter (:class:`FreeSpace`); it
+never cuts a mesh.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from hybridneus.data.dataset import SplitData
 
@@ -152,3 +154,58 @@ def event_hull_crop(
     pad = margin + hull.voxel  # a voxel: the grid only samples the hull
     radius = min(r, float(np.sqrt(pts[:, 0] ** 2 + pts[:, 2] ** 2).max()) + pad)
     return radius, max(y0, float(pts[:, 1].min()) - pad), min(y1, float(pts[:, 1].max()) + pad)
+
+
+class FreeSpace:
+    """Where an :class:`EventHull` says there is no matter, as a lookup on torch points.
+
+    ``free(points)`` is True where the point's nearest hull voxel, and every voxel within
+    ``grow`` voxels of it (a cube), is outside the hull; False elsewhere, including outside
+    the hull's grid, where the hull knows nothing. Growing keeps the nearest-voxel lookup
+    from calling free a point up to a voxel's half-diagonal outside a thin part.
+
+    Args:
+        hull: the hull.
+        grow: voxels added around the hull's occupied voxels.
+        device: where lookups run.
+    """
+
+    def __init__(self, hull: EventHull, grow: int = 1, device: torch.device | str = "cpu") -> None:
+        occupied = torch.from_numpy(np.ascontiguousarray(hull.occupied)).float()
+        if grow > 0:
+            k = 2 * grow + 1
+            occupied = torch.nn.functional.max_pool3d(occupied[None, None], k, 1, grow)[0, 0]
+        self.free_grid = (occupied < 0.5).to(device)
+        self.origin = torch.as_tensor(hull.origin, dtype=torch.float32, device=device)
+        self.voxel = float(hull.voxel)
+        self.shape = torch.tensor(hull.occupied.shape, device=device)
+
+    @property
+    def free_fraction(self) -> float:
+        """The share of the grid that is free."""
+        return float(self.free_grid.float().mean())
+
+    def free(self, points: torch.Tensor) -> torch.Tensor:
+        """(n,) bool for world ``points`` (n, 3): True where the hull says empty."""
+        idx = torch.round((points.detach() - self.origin) / self.voxel).long()
+        inside = ((idx >= 0) & (idx < self.shape)).all(dim=-1)
+        idx = torch.minimum(idx.clamp(min=0), self.shape - 1)
+        return inside & self.free_grid[idx[:, 0], idx[:, 1], idx[:, 2]]
+
+
+def event_free_space(
+    split: SplitData,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    resolution: int = 96,
+    grow: int = 1,
+    step: int | None = None,
+    device: torch.device | str = "cpu",
+) -> FreeSpace | None:
+    """The free space of the event hull (:func:`event_hull`, about 160 views, the crop's
+    votes) over the box [lo, hi]; ``None`` when no view outlines anything."""
+    step = step if step is not None else max(1, split.n_views // 160)
+    hull = event_hull(split, lo, hi, resolution, step=step)
+    if hull.n_views == 0 or not hull.occupied.any():
+        return None
+    return FreeSpace(hull, grow, device)

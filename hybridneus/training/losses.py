@@ -115,15 +115,17 @@ def curvature_loss(grad_a: torch.Tensor, grad_b: torch.Tensor) -> torch.Tensor:
 
 
 def outside_loss(sdf: torch.Tensor, outside: torch.Tensor) -> torch.Tensor:
-    """Mean of ``relu(-sdf)`` over points outside the crop cylinder (0 when there are none).
+    """Mean of ``relu(-sdf)`` over the points known to be empty (0 when there are none).
 
-    Nothing outside the crop is rendered, so no event constrains the field there; negative
-    values left over from initialisation would cap meshes at the crop boundary. This soft
+    Used for the points outside the crop cylinder and those the events' visual hull calls
+    empty. Nothing outside the crop is rendered, and space the cameras never see against
+    the background costs no event error, so no event keeps matter out of either; negative
+    values there (left over from initialisation, or grown) cap or fill meshes. This soft
     penalty pushes them positive without clamping the SDF (a hard clamp collapses training).
 
     Args:
         sdf: SDF at random points, (n_points,).
-        outside: (n_points,) bool, True outside the crop.
+        outside: (n_points,) bool, True where the point is known to be empty.
 
     Returns:
         loss: scalar.
