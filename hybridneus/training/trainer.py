@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from hybridneus.config import Config
+from hybridneus.data.hull import FreeSpace, event_free_space
 from hybridneus.model.field import HybridField, crop_aabb, crop_sdf
 from hybridneus.rendering.occupancy import OccupancyGrid
 from hybridneus.rendering.renderer import render_rays
@@ -253,7 +254,7 @@ class Trainer:
         with torch.no_grad():
             self.field.variance.clamp_(min=math.log(floor) / 10.0)
 
-    def _event_free_space(self):
+    def _event_free_space(self) -> FreeSpace | None:
         """The events' visual hull over the crop box, for the ``hull`` term (or ``None``).
 
         Events say nothing where nothing changes: matter the cameras never see against the
@@ -263,8 +264,6 @@ class Trainer:
         the hull of the event silhouettes records it as empty.
         """
         import logging
-
-        from hybridneus.data.hull import event_free_space
 
         lw = self.cfg.loss
         if lw.lambda_hull <= 0:
