@@ -125,6 +125,11 @@ def event_hull(
     return EventHull(~free.reshape(shape), lo, voxel, len(views))
 
 
+def _about_160_views(split: SplitData) -> int:
+    """The view step that uses about 160 views: enough to outline the object, and quick."""
+    return max(1, split.n_views // 160)
+
+
 def event_hull_crop(
     split: SplitData,
     crop: tuple[float, float, float],
@@ -141,7 +146,7 @@ def event_hull_crop(
     :func:`event_silhouettes`'s ``window`` and ``dilate``.
     """
     r, y0, y1 = (float(c) for c in crop)
-    step = step if step is not None else max(1, split.n_views // 160)
+    step = _about_160_views(split) if step is None else step
     hull = event_hull(split, (-r, y0, -r), (r, y1, r), resolution, step=step, **silhouette)
     if hull.n_views == 0:
         return None
@@ -207,7 +212,7 @@ def event_free_space(
 ) -> FreeSpace | None:
     """The free space of the event hull (:func:`event_hull`, about 160 views, the crop's
     votes) over the box [lo, hi]; ``None`` when no view outlines anything."""
-    step = step if step is not None else max(1, split.n_views // 160)
+    step = _about_160_views(split) if step is None else step
     hull = event_hull(split, lo, hi, resolution, step=step)
     if hull.n_views == 0 or not hull.occupied.any():
         return None
