@@ -18,6 +18,7 @@ from hybridneus.data.hull import (
     event_hull_crop,
     event_silhouettes,
     project_to_pixels,
+    without_noise,
 )
 from hybridneus.data.rays import camera_rays
 
@@ -45,6 +46,82 @@ def test_silhouettes_cover_the_object_and_leave_the_background(scene):
     assert len(views) >= 5
     fill = np.mean([m.mean() for m in masks])
     assert 0.02 < fill < 0.9  # an outline of the object, not the whole image
+
+
+def _outline(h: int = 260, w: int = 346, every: int = 1) -> np.ndarray:
+    """A moving object's firing pixels: a 3-pixel-wide ring, optionally one Bayer channel
+    only (every other pixel along both axes), plus a short stroke far from it."""
+    import cv2
+
+    mask = np.zeros((h, w), np.uint8)
+    cv2.ellipse(mask, (170, 130), (60, 40), 0, 0, 360, 1, 3)
+    cv2.line(mask, (260, 60), (275, 50), 1, 2)
+    mask = mask.astype(bool)
+    if every > 1:
+        keep = np.zeros_like(mask)
+        keep[::every, ::every] = True
+        mask &= keep
+    return mask
+
+
+def _hull_area(mask: np.ndarray) -> float:
+    import cv2
+
+    ys, xs = np.nonzero(mask)
+    return float(cv2.contourArea(cv2.convexHull(np.stack([xs, ys], 1).astype(np.int32))))
+
+
+def test_without_noise_leaves_a_clean_outline_alone():
+    for every in (1, 2):
+        clean = _outline(every=every)
+        np.testing.assert_array_equal(without_noise(clean), clean)
+
+
+@pytest.mark.parametrize("every", [1, 2])
+@pytest.mark.parametrize("density", [0.002, 0.008])
+def test_without_noise_removes_background_activity_and_keeps_the_outline(every, density):
+    rng = np.random.default_rng(0)
+    clean = _outline(every=every)
+    noise = rng.random(clean.shape) < density
+    got = without_noise(clean | noise)
+    assert got is not None
+    assert (got & clean).sum() == clean.sum()  # every outline pixel stays
+    # noise pixels well away from the outline are gone: its convex hull is the object's
+    assert _hull_area(got) < 1.1 * _hull_area(clean)
+    assert _hull_area(clean | noise) > 5 * _hull_area(clean)  # what the filter is for
+
+
+def test_without_noise_gives_up_on_a_window_drowned_in_noise():
+    rng = np.random.default_rng(1)
+    for density in (0.04, 0.2):
+        assert without_noise(_outline() | (rng.random((260, 346)) < density)) is None
+
+
+def test_silhouettes_of_noisy_events_match_the_clean_ones(scene, tmp_path):
+    """Background activity and hot pixels from the simulator: the silhouettes stay the clean
+    ones (they would fill the image without the filter) and the free space still spares
+    the object."""
+    from hybridneus.simulate import NoiseConfig, SimulationConfig, simulate_dataset
+
+    noisy = tmp_path / "noisy"
+    cfg = SimulationConfig(n_views=60, width=64, height=48, val_views=0, test_views=0,
+                           revolutions=2.0, supersample=1,
+                           noise=NoiseConfig(background_rate=0.002, hot_pixel_fraction=2e-3))
+    simulate_dataset("builtin:device", noisy, cfg)
+    clean_split, noisy_split = load_dataset(scene)["train"], load_dataset(noisy)["train"]
+    views, clean = event_silhouettes(clean_split, step=10)
+    noisy_views, masks = event_silhouettes(noisy_split, step=10)
+    assert noisy_views == views
+    covered = [(m & c).sum() / c.sum() for m, c in zip(masks, clean, strict=True)]
+    assert min(covered) > 0.97
+    assert np.mean([m.mean() for m in masks]) < 1.3 * np.mean([c.mean() for c in clean])
+    mesh = trimesh.load(scene / "gt_mesh.ply", force="mesh")
+    lo, hi = mesh.bounds[0] - 0.3, mesh.bounds[1] + 0.3
+    free = event_free_space(noisy_split, lo, hi, resolution=48)
+    surface, _ = trimesh.sample.sample_surface(mesh, 3000, seed=0)
+    assert free.free(torch.tensor(surface, dtype=torch.float32)).float().mean() < 0.002
+    shell = mesh.vertices + 0.2 * mesh.vertex_normals
+    assert free.free(torch.tensor(shell, dtype=torch.float32)).float().mean() > 0.5
 
 
 def test_event_hull_crop_holds_the_object_and_shrinks_a_loose_crop(scene):
