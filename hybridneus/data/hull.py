@@ -108,12 +108,13 @@ def without_noise(
 
 
 def event_silhouettes(
-    split: SplitData, window: int = 1, dilate: int = 2, step: int = 6
+    split: SplitData, window: int = 1, dilate: int = 2, step: int = 6, denoise: bool = True
 ) -> tuple[list[int], list[np.ndarray]]:
     """(view indices, boolean (height, width) masks) for every ``step``-th view: the filled
     convex hull of the pixels that fired within ``window`` views of it, less sensor noise
-    (:func:`without_noise`), grown by ``dilate`` pixels. Views with fewer than three firing
-    pixels (nothing to outline) or too much noise to tell the outline are skipped."""
+    (:func:`without_noise`; ``denoise=False`` takes every pixel), grown by ``dilate``
+    pixels. Views with fewer than three firing pixels (nothing to outline) or too much noise
+    to tell the outline are skipped."""
     import cv2
 
     from hybridneus.data.windows import event_counter
@@ -126,7 +127,8 @@ def event_silhouettes(
     for i in range(window, split.n_views - window, max(step, 1)):
         a = int(np.searchsorted(t, times[i - window], side="left"))
         b = int(np.searchsorted(t, times[i + window], side="right"))
-        fired = without_noise(counter.counts(a, b).sum(axis=1).reshape(h, w) > 0)
+        fired = counter.counts(a, b).sum(axis=1).reshape(h, w) > 0
+        fired = without_noise(fired) if denoise else fired
         if fired is None:
             continue
         ys, xs = np.nonzero(fired)
@@ -174,13 +176,14 @@ def event_hull(
     step: int = 6,
     min_seen: float = 0.1,
     min_votes: float = 0.05,
+    denoise: bool = True,
 ) -> EventHull:
     """The visual hull of the event silhouettes on a grid over the box [lo, hi] with
     ``resolution`` points along its longest side. A point is free when at least ``min_votes``
     of the views that see it (in front, inside the image) see it outside their silhouette,
     when fewer than ``min_seen`` of the views see it at all (the object is in most views'
     images), or when it is farther from the origin than the nearest camera (the object is
-    inside the ring)."""
+    inside the ring). ``denoise``: see :func:`event_silhouettes`."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     voxel = float((hi - lo).max()) / (resolution - 1)
     shape = tuple(int(np.ceil((hi - lo)[k] / voxel - 1e-9)) + 1 for k in range(3))
@@ -188,7 +191,7 @@ def event_hull(
     points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     n_out = np.zeros(points.shape[0], dtype=np.int32)
     n_seen = np.zeros(points.shape[0], dtype=np.int32)
-    views, masks = event_silhouettes(split, window, dilate, step)
+    views, masks = event_silhouettes(split, window, dilate, step, denoise)
     for view, mask in zip(views, masks, strict=True):
         u, v, front = project_to_pixels(split, view, points)
         seen = front & (u >= 0) & (u < split.width) & (v >= 0) & (v < split.height)
@@ -206,7 +209,7 @@ def event_hull(
     return EventHull(~free.reshape(shape), lo, voxel, len(views))
 
 
-def _about_160_views(split: SplitData) -> int:
+def hull_view_step(split: SplitData) -> int:
     """The view step that uses about 160 views: enough to outline the object, and quick."""
     return max(1, split.n_views // 160)
 
@@ -227,7 +230,7 @@ def event_hull_crop(
     :func:`event_silhouettes`'s ``window`` and ``dilate``.
     """
     r, y0, y1 = (float(c) for c in crop)
-    step = _about_160_views(split) if step is None else step
+    step = hull_view_step(split) if step is None else step
     hull = event_hull(split, (-r, y0, -r), (r, y1, r), resolution, step=step, **silhouette)
     if hull.n_views == 0:
         return None
@@ -293,7 +296,7 @@ def event_free_space(
 ) -> FreeSpace | None:
     """The free space of the event hull (:func:`event_hull`, about 160 views, the crop's
     votes) over the box [lo, hi]; ``None`` when no view outlines anything."""
-    step = _about_160_views(split) if step is None else step
+    step = hull_view_step(split) if step is None else step
     hull = event_hull(split, lo, hi, resolution, step=step)
     if hull.n_views == 0 or not hull.occupied.any():
         return None
