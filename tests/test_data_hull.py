@@ -115,6 +115,8 @@ def test_silhouettes_of_noisy_events_match_the_clean_ones(scene, tmp_path):
     covered = [(m & c).sum() / c.sum() for m, c in zip(masks, clean, strict=True)]
     assert min(covered) > 0.97
     assert np.mean([m.mean() for m in masks]) < 1.3 * np.mean([c.mean() for c in clean])
+    _, raw = event_silhouettes(noisy_split, step=10, denoise=False)  # what the filter is for
+    assert np.mean([m.mean() for m in raw]) > 1.5 * np.mean([c.mean() for c in clean])
     mesh = trimesh.load(scene / "gt_mesh.ply", force="mesh")
     lo, hi = mesh.bounds[0] - 0.3, mesh.bounds[1] + 0.3
     free = event_free_space(noisy_split, lo, hi, resolution=48)

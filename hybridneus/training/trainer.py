@@ -274,7 +274,8 @@ class Trainer:
         )
         log = logging.getLogger("hybridneus")
         if free is None:
-            log.info("hull: the events outline nothing; no hull term")
+            log.info("hull: the events outline nothing (no view fired, or all were too noisy); "
+                     "no hull term")
         else:
             log.info(f"hull: the events' visual hull calls {free.free_fraction:.0%} of the "
                      "crop box empty (loss.lambda_hull)")
