@@ -273,11 +273,11 @@ def test_hull_term_empties_the_space_the_event_hull_calls_free(scene):
     """The initial sphere fills space that no event rules out but the event silhouettes
     call empty; the hull term pushes the SDF there positive."""
     trainers = {}
-    for lam in ("0", "1"):
-        trainer, _ = prepare(scene, tiny("train.iters=40", f"loss.lambda_hull={lam}"),
-                             device="cpu")
+    for name, lam, start in (("0", 0, 0), ("1", 1, 0), ("late", 1, 1000)):
+        trainer, _ = prepare(scene, tiny("train.iters=40", f"loss.lambda_hull={lam}",
+                                         f"loss.hull_start={start}"), device="cpu")
         trainer.fit(progress=False)
-        trainers[lam] = trainer
+        trainers[name] = trainer
     assert trainers["0"].free_space is None
     pts = trainers["1"]._random_points(20000)
     free = trainers["1"].free_space.free(pts)
@@ -288,6 +288,8 @@ def test_hull_term_empties_the_space_the_event_hull_calls_free(scene):
             share[lam] = float((trainer.field.sdf(pts[free]) < 0).float().mean())
     assert share["0"] > 0.05
     assert share["1"] < 0.5 * share["0"]
+    # before loss.hull_start the term is not there at all
+    assert share["late"] == pytest.approx(share["0"], abs=0.02)
 
 
 @pytest.mark.slow

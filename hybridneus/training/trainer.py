@@ -374,7 +374,7 @@ class Trainer:
                 terms["sparsity"] = L.sparsity_loss(sdf_r[~outside], lw.sparsity_tau)
             if lw.lambda_outside > 0:
                 terms["outside"] = L.outside_loss(sdf_r, outside)
-            if self.free_space is not None:
+            if self.free_space is not None and self.step >= lw.hull_start:
                 terms["hull"] = L.outside_loss(sdf_r, self.free_space.free(pts) & ~outside)
         if lw.lambda_eikonal > 0:
             terms["eikonal"] = L.eikonal_loss(torch.cat(grads))
