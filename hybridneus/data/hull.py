@@ -2,10 +2,10 @@
 
 Against a constant background, only the object fires events. For a view ``i``, the pixels that
 fired within ``window`` views of it outline the object's image (its silhouette edges move as
-the camera does); their filled convex hull, grown by ``dilate`` pixels, contains the object's
-image. A point that projects inside the image but outside that hull in any view is free
-space. The hull is conservative (convex per view, dilated, sensor noise only grows it) and
-cannot see into concavities. It tightens the scene's crop cylinder (:func:`event_hull_crop`)
+the camera does); with sensor noise removed (:func:`without_noise`), their filled convex hull,
+grown by ``dilate`` pixels, contains the object's image. A point that projects inside the
+image but outside that hull in enough views is free space. The hull is conservative (convex
+per view, dilated, voted) and cannot see into concavities. It tightens the scene's crop cylinder (:func:`event_hull_crop`)
 and, during training, tells the field where there is no matter (:class:`FreeSpace`); it
 never cuts a mesh.
 """
