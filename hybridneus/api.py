@@ -70,7 +70,7 @@ def _crop_from_events(cfg: Config, dataset: Any, crop_keys: tuple[str, ...]) -> 
     import logging
 
     from hybridneus.data import apply_overrides as preset_overrides
-    from hybridneus.data.hull import event_hull_crop
+    from hybridneus.data.hull import NOTHING_OUTLINED, event_hull_crop
 
     p = dataset.preset
     crop = (p.crop_r, p.crop_y_min, p.crop_y_max)
@@ -78,8 +78,7 @@ def _crop_from_events(cfg: Config, dataset: Any, crop_keys: tuple[str, ...]) -> 
     log.info("crop: outlining the object from the events (data.crop_from_events) ...")
     tight = event_hull_crop(dataset[cfg.data.split], crop)
     if tight is None or all(abs(a - b) < 1e-6 for a, b in zip(tight, crop, strict=True)):
-        why = ("the events outline nothing (no view fired, or all were too noisy)"
-               if tight is None else "it is inside the events' hull")
+        why = NOTHING_OUTLINED if tight is None else "it is inside the events' hull"
         log.info(f"crop: keeping the preset's (r {p.crop_r:g}, y {p.crop_y_min:g} .. "
                  f"{p.crop_y_max:g}): {why}")
         # recorded all the same, so that a resume does not outline the object again

@@ -126,6 +126,30 @@ def test_silhouettes_of_noisy_events_match_the_clean_ones(scene, tmp_path):
     assert free.free(torch.tensor(shell, dtype=torch.float32)).float().mean() > 0.5
 
 
+def test_silhouettes_are_outlined_once_per_split_and_setting(scene, monkeypatch):
+    import hybridneus.data.hull as hull_module
+
+    split = load_dataset(scene)["train"]
+    calls = []
+    outline = hull_module._silhouettes
+    monkeypatch.setattr(
+        hull_module, "_silhouettes", lambda *a: calls.append(a[1:]) or outline(*a)
+    )
+    first = event_silhouettes(split, step=7)
+    # the crop and the hull term both ask for these views: the second asks for nothing new
+    event_hull_crop(split, (1.0, -1.0, 1.0), step=7)
+    event_free_space(split, -np.ones(3), np.ones(3), resolution=16, step=7)
+    assert calls == [(1, 2, 7, True)]
+    again = event_silhouettes(split, step=7)
+    assert again[0] == first[0] and all(a is b for a, b in zip(again[1], first[1], strict=True))
+    event_silhouettes(split, step=7, denoise=False)
+    event_silhouettes(split, step=8)
+    assert calls == [(1, 2, 7, True), (1, 2, 7, False), (1, 2, 8, True)]
+    # another split (its own events) outlines its own views
+    event_silhouettes(load_dataset(scene)["train"], step=7)
+    assert len(calls) == 4
+
+
 def test_event_hull_crop_holds_the_object_and_shrinks_a_loose_crop(scene):
     split = load_dataset(scene)["train"]
     v = trimesh.load(scene / "gt_mesh.ply", force="mesh").vertices

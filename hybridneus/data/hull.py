@@ -35,6 +35,8 @@ class EventHull:
 NOISE_RADIUS = 2
 #: The longest step, in cells, by which :func:`without_noise` joins firing cells to an outline.
 MAX_LINK = 8
+#: Why there is no hull, for the crop's and the ``hull`` term's log lines.
+NOTHING_OUTLINED = "the events outline nothing (no view fired, or all were too noisy)"
 
 
 def without_noise(
@@ -114,7 +116,20 @@ def event_silhouettes(
     convex hull of the pixels that fired within ``window`` views of it, less sensor noise
     (:func:`without_noise`; ``denoise=False`` takes every pixel), grown by ``dilate``
     pixels. Views with fewer than three firing pixels (nothing to outline) or too much noise
-    to tell the outline are skipped."""
+    to tell the outline are skipped. Kept in ``split.events.cache``: the crop and the
+    ``hull`` term outline the same views."""
+    key = ("silhouettes", split.width, split.height, split.n_views, window, dilate, max(step, 1),
+           denoise)
+    cached = split.events.cache.get(key)
+    if cached is None:
+        cached = _silhouettes(split, window, dilate, max(step, 1), denoise)
+        split.events.cache[key] = cached
+    return list(cached[0]), list(cached[1])
+
+
+def _silhouettes(
+    split: SplitData, window: int, dilate: int, step: int, denoise: bool
+) -> tuple[list[int], list[np.ndarray]]:
     import cv2
 
     from hybridneus.data.windows import event_counter
@@ -124,7 +139,7 @@ def event_silhouettes(
     t, times = split.events.t, split.view_times
     views, masks = [], []
     kernel = np.ones((2 * dilate + 1,) * 2, np.uint8) if dilate > 0 else None
-    for i in range(window, split.n_views - window, max(step, 1)):
+    for i in range(window, split.n_views - window, step):
         a = int(np.searchsorted(t, times[i - window], side="left"))
         b = int(np.searchsorted(t, times[i + window], side="right"))
         fired = counter.counts(a, b).sum(axis=1).reshape(h, w) > 0

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from hybridneus.config import Config
-from hybridneus.data.hull import FreeSpace, event_free_space
+from hybridneus.data.hull import NOTHING_OUTLINED, FreeSpace, event_free_space
 from hybridneus.model.field import HybridField, crop_aabb, crop_sdf
 from hybridneus.rendering.occupancy import OccupancyGrid
 from hybridneus.rendering.renderer import render_rays
@@ -274,8 +274,7 @@ class Trainer:
         )
         log = logging.getLogger("hybridneus")
         if free is None:
-            log.info("hull: the events outline nothing (no view fired, or all were too noisy); "
-                     "no hull term")
+            log.info(f"hull: {NOTHING_OUTLINED}; no hull term")
         else:
             log.info(f"hull: the events' visual hull calls {free.free_fraction:.0%} of the "
                      "crop box empty (loss.lambda_hull)")
