@@ -89,7 +89,7 @@ class LossConfig:
     lambda_curvature: float = 0.0  # normal variation at the rendered surface points
     lambda_sparsity: float = 0.0  # exp(-tau |sdf|) on random points in the crop (anti-floater)
     lambda_outside: float = 1.0  # relu(-sdf) at random points outside the crop (no caps there)
-    lambda_hull: float = 1.0  # relu(-sdf) at random points and samples the event hull calls empty
+    lambda_hull: float = 1.0  # relu(-sdf) at random points the events' visual hull calls empty
     hull_resolution: int = 96  # hull grid points along the crop box's longest side
     hull_grow: int = 0  # hull voxels added around the hull before the rest counts as empty
     hull_start: int = 200  # steps without the hull term at the start (the surface forms first)

@@ -292,28 +292,6 @@ def test_hull_term_empties_the_space_the_event_hull_calls_free(scene):
     assert share["late"] == pytest.approx(share["0"], abs=0.02)
 
 
-def test_hull_term_also_acts_on_the_render_samples(scene):
-    """With no random volume points the term still reaches matter in free space through the
-    render's samples, which crowd onto the surfaces the rays see."""
-    trainers = {}
-    for lam in (0, 1):
-        trainer, _ = prepare(scene, tiny("train.iters=40", f"loss.lambda_hull={lam}",
-                                         "loss.hull_start=0", "loss.n_random_points=0"),
-                             device="cpu")
-        seen = []
-        trainer.fit([lambda t, lg, seen=seen: seen.append("loss/hull" in lg)], progress=False)
-        assert all(seen) if lam else not any(seen)
-        trainers[lam] = trainer
-    pts = trainers[1]._random_points(20000)
-    free = trainers[1].free_space.free(pts)
-    share = {}
-    for lam, trainer in trainers.items():
-        with torch.no_grad():
-            share[lam] = float((trainer.field.sdf(pts[free]) < 0).float().mean())
-    assert share[0] > 0.05
-    assert share[1] < 0.5 * share[0]
-
-
 @pytest.mark.slow
 def test_fit_moves_the_zero_level_towards_the_true_surface(tmp_path_factory):
     """400 steps on a 64x48, 80-view scene beat the initial sphere's Chamfer (issue criterion)."""

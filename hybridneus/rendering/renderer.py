@@ -23,10 +23,6 @@ class RenderOutput:
         weights: (n_rays, n_samples).
         opacity_fixed_s: opacity with the NeuS sharpness held constant, so that its gradient
             reaches the SDF only, (n_rays,); None unless asked for.
-        points: the sample positions, (n_rays * n_samples, 3); None from
-            :func:`render_rays_chunked`.
-        sdf: the SDF at ``points``, (n_rays * n_samples,); None from
-            :func:`render_rays_chunked`.
     """
 
     color: torch.Tensor
@@ -36,8 +32,6 @@ class RenderOutput:
     gradients: torch.Tensor
     weights: torch.Tensor
     opacity_fixed_s: torch.Tensor | None = None
-    points: torch.Tensor | None = None
-    sdf: torch.Tensor | None = None
 
 
 def render_rays(
@@ -99,9 +93,7 @@ def render_rays(
         normals = torch.nn.functional.normalize(grad, dim=-1).view(n_rays, n_samples, 3)
         normal = composite(weights, normals)
         depth = (weights * mids).sum(dim=-1)
-    return RenderOutput(
-        color, weights.sum(dim=-1), depth, normal, grad, weights, fixed, pts, sdf.view(-1)
-    )
+    return RenderOutput(color, weights.sum(dim=-1), depth, normal, grad, weights, fixed)
 
 
 def render_rays_chunked(

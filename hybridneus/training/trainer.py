@@ -354,12 +354,6 @@ class Trainer:
                 out.color, out.opacity, self.field.background(), lw.background_matter_sigma
             )
             terms["background_matter"] = L.background_matter_loss(out.opacity_fixed_s, match)
-        hull_on = self.free_space is not None and self.step >= lw.hull_start
-        if hull_on:
-            # the render's samples crowd onto every surface it sees, a spurious one in free
-            # space too, where uniform random points seldom land inside a thin sheet of matter;
-            # a mean of their own, so that their number does not dilute the random points'
-            terms["hull"] = L.outside_loss(out.sdf, self.free_space.free(out.points))
         need_random = lw.n_random_points > 0 and (
             lw.lambda_eikonal > 0 or lw.lambda_sparsity > 0 or lw.lambda_outside > 0
             or self.free_space is not None
@@ -379,9 +373,8 @@ class Trainer:
                 terms["sparsity"] = L.sparsity_loss(sdf_r[~outside], lw.sparsity_tau)
             if lw.lambda_outside > 0:
                 terms["outside"] = L.outside_loss(sdf_r, outside)
-            if hull_on:
-                free = self.free_space.free(pts) & ~outside
-                terms["hull"] = terms["hull"] + L.outside_loss(sdf_r, free)
+            if self.free_space is not None and self.step >= lw.hull_start:
+                terms["hull"] = L.outside_loss(sdf_r, self.free_space.free(pts) & ~outside)
         if lw.lambda_eikonal > 0:
             terms["eikonal"] = L.eikonal_loss(torch.cat(grads))
         total = sum(getattr(lw, f"lambda_{name}") * value for name, value in terms.items())
