@@ -15,6 +15,7 @@ from hybridneus.data.hull import (
     EventHull,
     FreeSpace,
     event_free_space,
+    event_hull,
     event_hull_crop,
     event_silhouettes,
     project_to_pixels,
@@ -148,6 +149,19 @@ def test_silhouettes_are_outlined_once_per_split_and_setting(scene, monkeypatch)
     # another split (its own events) outlines its own views
     event_silhouettes(load_dataset(scene)["train"], step=7)
     assert len(calls) == 4
+
+
+def test_event_hull_takes_given_silhouettes(scene):
+    split = load_dataset(scene)["train"]
+    lo, hi = -np.ones(3), np.ones(3)
+    own = event_hull(split, lo, hi, 20, step=7)
+    views, masks = event_silhouettes(split, step=7)
+    same = event_hull(split, lo, hi, 20, silhouettes=(views, masks))
+    np.testing.assert_array_equal(same.occupied, own.occupied)
+    # silhouettes that cover every image carve only what the vote-free rules carve
+    whole = event_hull(split, lo, hi, 20, silhouettes=(views, [np.ones_like(m) for m in masks]))
+    assert whole.occupied.sum() > 2 * own.occupied.sum()
+    assert (whole.occupied | ~own.occupied).all()
 
 
 def test_event_hull_crop_holds_the_object_and_shrinks_a_loose_crop(scene):

@@ -192,13 +192,16 @@ def event_hull(
     min_seen: float = 0.1,
     min_votes: float = 0.05,
     denoise: bool = True,
+    silhouettes: tuple[list[int], list[np.ndarray]] | None = None,
 ) -> EventHull:
     """The visual hull of the event silhouettes on a grid over the box [lo, hi] with
     ``resolution`` points along its longest side. A point is free when at least ``min_votes``
     of the views that see it (in front, inside the image) see it outside their silhouette,
     when fewer than ``min_seen`` of the views see it at all (the object is in most views'
     images), or when it is farther from the origin than the nearest camera (the object is
-    inside the ring). ``denoise``: see :func:`event_silhouettes`."""
+    inside the ring). ``denoise``: see :func:`event_silhouettes`. ``silhouettes``: (view
+    indices, masks) to use instead of :func:`event_silhouettes`'s (``window``, ``dilate``,
+    ``step`` and ``denoise`` are then unused)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     voxel = float((hi - lo).max()) / (resolution - 1)
     shape = tuple(int(np.ceil((hi - lo)[k] / voxel - 1e-9)) + 1 for k in range(3))
@@ -206,7 +209,9 @@ def event_hull(
     points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     n_out = np.zeros(points.shape[0], dtype=np.int32)
     n_seen = np.zeros(points.shape[0], dtype=np.int32)
-    views, masks = event_silhouettes(split, window, dilate, step, denoise)
+    if silhouettes is None:
+        silhouettes = event_silhouettes(split, window, dilate, step, denoise)
+    views, masks = silhouettes
     for view, mask in zip(views, masks, strict=True):
         u, v, front = project_to_pixels(split, view, points)
         seen = front & (u >= 0) & (u < split.width) & (v >= 0) & (v < split.height)
