@@ -6,7 +6,8 @@ still reach. For each run it meshes the last snapshot (or checkpoint) as the sui
 samples points on that mesh and measures their distance to the ground truth (world units).
 It then reports, for the free space the trainer builds (the crop box, ``loss.hull_resolution``),
 the share of the box called empty, the share of the true surface called empty (what the
-term would carve), and, per distance band, the share of the fit's surface called empty.
+term would carve), and, per distance band, the share of the fit's surface called empty, at
+the surface and one hull voxel inside it (where a negative SDF would meet the term).
 It also reports the trainer's loss log: the mean ``loss/hull`` over the last quarter.
 
 ``--close K`` also tries non-convex silhouettes: the firing pixels (noise removed) closed by
@@ -117,7 +118,8 @@ def main() -> None:
         box = crop_aabb(field.crop.cpu()).numpy().astype(np.float64)
         gt = trimesh.load(data / "gt_mesh.ply", force="mesh")
         mesh = extract_mesh(field, res=args.res, progress=False)
-        fit_pts, _ = trimesh.sample.sample_surface(mesh, args.points, seed=0)
+        fit_pts, faces = trimesh.sample.sample_surface(mesh, args.points, seed=0)
+        normals = np.asarray(mesh.face_normals)[faces]
         true_pts, _ = trimesh.sample.sample_surface(gt, 2 * args.points, seed=1)
         dist = cKDTree(true_pts).query(fit_pts)[0]
         split = load_dataset(data)["train"]
@@ -130,6 +132,9 @@ def main() -> None:
                                   min_votes=votes, silhouettes=sil)
                 free = FreeSpace(hull)
                 called = free.free(torch.tensor(fit_pts, dtype=torch.float32)).numpy()
+                # one voxel inside the fit's surface: where the term's relu(-sdf) would act
+                inward = fit_pts - hull.voxel * normals
+                called_in = free.free(torch.tensor(inward, dtype=torch.float32)).numpy()
                 carved = free.free(torch.tensor(true_pts, dtype=torch.float32)).numpy()
                 bands = []
                 for lo, hi in BANDS:
@@ -137,7 +142,9 @@ def main() -> None:
                     bands.append({"from": lo, "to": None if np.isinf(hi) else hi,
                                   "share": round(float(sel.mean()), 4),
                                   "free": round(float(called[sel].mean()), 4) if sel.any()
-                                  else None})
+                                  else None,
+                                  "free_voxel_inside": round(float(called_in[sel].mean()), 4)
+                                  if sel.any() else None})
                 line = {"when": dt.datetime.now().isoformat(timespec="seconds"),
                         "run": str(run), "scene": info.get("scene"), "step": int(snap["step"]),
                         "silhouettes": form, "votes": votes, "views": hull.n_views,
@@ -149,7 +156,8 @@ def main() -> None:
                 far = bands[-1]
                 print(f"{run.name} {form} votes {votes}: box free {line['box_free']:.3f}, "
                       f"true surface free {100 * line['true_surface_free']:.3f}%, fit surface "
-                      f">= 0.02 from the truth {far['share']:.3f} (free {far['free']}), "
+                      f">= 0.02 from the truth {far['share']:.3f} (free {far['free']}, "
+                      f"a voxel inside {far['free_voxel_inside']}), "
                       f"hull loss {line['hull_loss_last_quarter']}", flush=True)
 
 
