@@ -143,6 +143,8 @@ def test_silhouettes_are_outlined_once_per_split_and_setting(scene, monkeypatch)
     assert calls == [(1, 2, 7, True)]
     again = event_silhouettes(split, step=7)
     assert again[0] == first[0] and all(a is b for a, b in zip(again[1], first[1], strict=True))
+    with pytest.raises(ValueError):  # a caller cannot spoil the others' masks
+        again[1][0][0, 0] = True
     event_silhouettes(split, step=7, denoise=False)
     event_silhouettes(split, step=8)
     assert calls == [(1, 2, 7, True), (1, 2, 7, False), (1, 2, 8, True)]

@@ -117,12 +117,14 @@ def event_silhouettes(
     (:func:`without_noise`; ``denoise=False`` takes every pixel), grown by ``dilate``
     pixels. Views with fewer than three firing pixels (nothing to outline) or too much noise
     to tell the outline are skipped. Kept in ``split.events.cache``: the crop and the
-    ``hull`` term outline the same views."""
+    ``hull`` term outline the same views (the masks are read-only)."""
     key = ("silhouettes", split.width, split.height, split.n_views, window, dilate, max(step, 1),
            denoise)
     cached = split.events.cache.get(key)
     if cached is None:
         cached = _silhouettes(split, window, dilate, max(step, 1), denoise)
+        for mask in cached[1]:
+            mask.flags.writeable = False  # shared by every caller
         split.events.cache[key] = cached
     return list(cached[0]), list(cached[1])
 
