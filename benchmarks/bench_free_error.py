@@ -38,19 +38,14 @@ def closed_silhouettes(split, radius: int, window: int = 1, dilate: int = 2):
     pixels replaced by their closing with a disc of ``radius`` pixels, holes filled."""
     import cv2
 
-    from hybridneus.data.hull import hull_view_step, without_noise
-    from hybridneus.data.windows import event_counter
+    from hybridneus.data.hull import fired_near, hull_view_step
 
     w, h = split.width, split.height
-    counter = event_counter(split)
-    t, times = split.events.t, split.view_times
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1,) * 2)
     grow = np.ones((2 * dilate + 1,) * 2, np.uint8)
     views, masks = [], []
     for i in range(window, split.n_views - window, hull_view_step(split)):
-        a = int(np.searchsorted(t, times[i - window], side="left"))
-        b = int(np.searchsorted(t, times[i + window], side="right"))
-        fired = without_noise(counter.counts(a, b).sum(axis=1).reshape(h, w) > 0)
+        fired = fired_near(split, i, window)
         if fired is None or fired.sum() < 3:
             continue
         shut = cv2.morphologyEx(fired.astype(np.uint8), cv2.MORPH_CLOSE, disc,
@@ -66,16 +61,8 @@ def closed_silhouettes(split, radius: int, window: int = 1, dilate: int = 2):
 def hull_loss_tail(run: Path) -> float | None:
     """Mean ``loss/hull`` over the last quarter of the run's metrics (None if not logged)."""
     with open(run / "metrics.csv", newline="") as f:
-        rows = list(csv.reader(f))
-    head, rows = rows[0], rows[1:]
-    if not rows:
-        return None
-    # the column appears when the term starts, so a row's width decides where it is
-    values = []
-    for row in rows[3 * len(rows) // 4:]:
-        record = dict(zip(head + ["loss/hull"] * (len(row) - len(head)), row, strict=False))
-        if record.get("loss/hull"):
-            values.append(float(record["loss/hull"]))
+        rows = list(csv.DictReader(f))  # the run log rewrites the header when a column appears
+    values = [float(r["loss/hull"]) for r in rows[3 * len(rows) // 4:] if r.get("loss/hull")]
     return float(np.mean(values)) if values else None
 
 

@@ -5,9 +5,9 @@ fired within ``window`` views of it outline the object's image (its silhouette e
 the camera does); with sensor noise removed (:func:`without_noise`), their filled convex hull,
 grown by ``dilate`` pixels, contains the object's image. A point that projects inside the
 image but outside that hull in enough views is free space. The hull is conservative (convex
-per view, dilated, voted) and cannot see into concavities. It tightens the scene's crop cylinder (:func:`event_hull_crop`)
-and, during training, tells the field where there is no matter (:class:`FreeSpace`); it
-never cuts a mesh.
+per view, dilated, voted) and cannot see into concavities. It tightens the scene's crop
+cylinder (:func:`event_hull_crop`) and, during training, tells the field where there is no
+matter (:class:`FreeSpace`); it never cuts a mesh.
 """
 
 from __future__ import annotations
@@ -129,23 +129,33 @@ def event_silhouettes(
     return list(cached[0]), list(cached[1])
 
 
+def fired_near(
+    split: SplitData, view: int, window: int = 1, denoise: bool = True
+) -> np.ndarray | None:
+    """(height, width) bool: the pixels that fired within ``window`` views of ``view``, less
+    sensor noise (:func:`without_noise`; ``denoise=False`` keeps every pixel). ``None`` when
+    the window is too noisy to tell the outline."""
+    from hybridneus.data.windows import event_counter
+
+    t, times = split.events.t, split.view_times
+    a = int(np.searchsorted(t, times[view - window], side="left"))
+    b = int(np.searchsorted(t, times[view + window], side="right"))
+    # the counter is shared with training's event frames
+    counts = event_counter(split).counts(a, b).sum(axis=1)
+    fired = counts.reshape(split.height, split.width) > 0
+    return without_noise(fired) if denoise else fired
+
+
 def _silhouettes(
     split: SplitData, window: int, dilate: int, step: int, denoise: bool
 ) -> tuple[list[int], list[np.ndarray]]:
     import cv2
 
-    from hybridneus.data.windows import event_counter
-
     w, h = split.width, split.height
-    counter = event_counter(split)  # shared with training's event frames
-    t, times = split.events.t, split.view_times
     views, masks = [], []
     kernel = np.ones((2 * dilate + 1,) * 2, np.uint8) if dilate > 0 else None
     for i in range(window, split.n_views - window, step):
-        a = int(np.searchsorted(t, times[i - window], side="left"))
-        b = int(np.searchsorted(t, times[i + window], side="right"))
-        fired = counter.counts(a, b).sum(axis=1).reshape(h, w) > 0
-        fired = without_noise(fired) if denoise else fired
+        fired = fired_near(split, i, window, denoise)
         if fired is None:
             continue
         ys, xs = np.nonzero(fired)
