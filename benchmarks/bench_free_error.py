@@ -90,6 +90,8 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     out = REPO / "benchmarks" / "results" / "free_error.jsonl"
     for run in args.runs:
+        if not (run / "fit.json").is_file():
+            raise SystemExit(f"{run}: no fit.json (a run_suite.py run folder is needed)")
         info = json.loads((run / "fit.json").read_text())
         data = Path(info["dataset"])
         cfg = load_config(run / "config.yaml")
