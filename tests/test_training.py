@@ -15,6 +15,7 @@ from hybridneus.api import fit, prepare
 from hybridneus.config import apply_overrides, preset_config
 from hybridneus.training import losses as L
 from hybridneus.training.runs import latest_run, load_checkpoint, load_field
+from hybridneus.training.trainer import onset_weight
 
 TINY = [
     "grid.n_levels=6",
@@ -419,3 +420,11 @@ def test_rgb_supervision_errors(scene, tmp_path):
     shutil.rmtree(copy / "train" / "rgb")
     with pytest.raises(DatasetError, match="no rgb/ frames"):
         prepare(copy, tiny("train.supervision=rgb"), device="cpu")
+
+
+def test_onset_weight_waits_then_grows_linearly_to_one():
+    assert onset_weight(0, 0, 0) == 1.0
+    assert onset_weight(49, 50, 0) == 0.0
+    assert onset_weight(50, 50, 0) == 1.0
+    assert [onset_weight(s, 10, 4) for s in (9, 10, 11, 12, 13, 500)] == [
+        0.0, 0.25, 0.5, 0.75, 1.0, 1.0]

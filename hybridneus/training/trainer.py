@@ -48,6 +48,25 @@ def lr_factor(step: int, total: int, warmup: int, decay_start: float, decay_fina
     return f
 
 
+def onset_weight(step: int, start: int, ramp: int) -> float:
+    """Weight of a loss term that is off before ``start`` and then grows linearly to 1 over
+    ``ramp`` steps (at once when ``ramp <= 0``).
+
+    A term switched on at full weight part-way through training (Adam has scaled its steps
+    to the other terms' gradients) jolts the field; one grown from 0 does not.
+
+    Args:
+        step: current step (0-based).
+        start: first step with the term.
+        ramp: steps from ``start`` until full weight.
+    """
+    if step < start:
+        return 0.0
+    if ramp <= 0:
+        return 1.0
+    return min(1.0, (step - start + 1) / ramp)
+
+
 def inv_s_floor(
     step: int,
     total: int,
@@ -373,8 +392,9 @@ class Trainer:
                 terms["sparsity"] = L.sparsity_loss(sdf_r[~outside], lw.sparsity_tau)
             if lw.lambda_outside > 0:
                 terms["outside"] = L.outside_loss(sdf_r, outside)
-            if self.free_space is not None and self.step >= lw.hull_start:
-                terms["hull"] = L.outside_loss(sdf_r, self.free_space.free(pts) & ~outside)
+            ramp = onset_weight(self.step, lw.hull_start, lw.hull_ramp)
+            if self.free_space is not None and ramp > 0:
+                terms["hull"] = ramp * L.outside_loss(sdf_r, self.free_space.free(pts) & ~outside)
         if lw.lambda_eikonal > 0:
             terms["eikonal"] = L.eikonal_loss(torch.cat(grads))
         total = sum(getattr(lw, f"lambda_{name}") * value for name, value in terms.items())
