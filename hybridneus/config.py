@@ -92,8 +92,8 @@ class LossConfig:
     lambda_hull: float = 1.0  # relu(-sdf) at random points the events' visual hull calls empty
     hull_resolution: int = 96  # hull grid points along the crop box's longest side
     hull_grow: int = 0  # hull voxels added around the hull before the rest counts as empty
-    hull_start: int = 200  # steps without the hull term at the start (the surface forms first)
-    hull_ramp: int = 0  # steps after hull_start over which the hull term's weight grows from 0 to 1
+    hull_start: int = 0  # steps without the hull term at the start
+    hull_ramp: int = 300  # steps after hull_start over which the hull weight grows from 0 to 1
     sparsity_tau: float = 50.0  # decay of the sparsity term (1/world units)
     lambda_background_matter: float = 0.0  # thin matter that looks like the background
     background_matter_sigma: float = 0.1  # colour distance at which that term fades (exp(-(d/s)^2))

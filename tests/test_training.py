@@ -276,7 +276,8 @@ def test_hull_term_empties_the_space_the_event_hull_calls_free(scene):
     trainers = {}
     for name, lam, start in (("0", 0, 0), ("1", 1, 0), ("late", 1, 1000)):
         trainer, _ = prepare(scene, tiny("train.iters=40", f"loss.lambda_hull={lam}",
-                                         f"loss.hull_start={start}"), device="cpu")
+                                         f"loss.hull_start={start}", "loss.hull_ramp=0"),
+                             device="cpu")
         trainer.fit(progress=False)
         trainers[name] = trainer
     assert trainers["0"].free_space is None
