@@ -117,6 +117,7 @@ class TrainConfig:
     inv_s_floor_at: float = 0.5  # fraction of training at which the floor reaches inv_s_floor
     inv_s_floor_min_steps: int = 1500  # ... but not before this step
     inv_s_floor_delay: int = 100  # steps without a floor at the start
+    inv_s_floor_blend: int = 100  # steps after the delay over which the floor rises to its curve
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
     warmup: int = 50  # linear learning-rate warm-up steps

@@ -220,6 +220,12 @@ def test_inv_s_floor_grows_geometrically_then_holds():
     # no floor during the delay; after it, the same curve as without one
     assert inv_s_floor(9, 100, 20.0, 200.0, 0.5, 0, 10) == 0.0
     assert inv_s_floor(10, 100, 20.0, 200.0, 0.5, 0, 10) == inv_s_floor(10, 100, 20.0, 200.0, 0.5)
+    # the blend after the delay: f ** w, w from 1 / blend to 1, then the curve itself
+    curve = [inv_s_floor(s, 100, 20.0, 200.0, 0.5) for s in range(100)]
+    assert inv_s_floor(10, 100, 20.0, 200.0, 0.5, 0, 10, 4) == pytest.approx(curve[10] ** 0.25)
+    assert inv_s_floor(12, 100, 20.0, 200.0, 0.5, 0, 10, 4) == pytest.approx(curve[12] ** 0.75)
+    assert inv_s_floor(13, 100, 20.0, 200.0, 0.5, 0, 10, 4) == pytest.approx(curve[13])
+    assert inv_s_floor(60, 100, 20.0, 200.0, 0.5, 0, 10, 4) == pytest.approx(200.0)
 
 
 def test_inv_s_floor_holds_the_sharpness_up_and_lets_it_rise(scene):
@@ -230,7 +236,7 @@ def test_inv_s_floor_holds_the_sharpness_up_and_lets_it_rise(scene):
 
     cfg = tiny("train.iters=20", "train.lr_variance=0.0", "train.inv_s_floor=400",
                "train.inv_s_floor_at=0.5", "train.inv_s_floor_min_steps=0",
-               "train.inv_s_floor_delay=6")
+               "train.inv_s_floor_delay=6", "train.inv_s_floor_blend=0")
     trainer, _ = prepare(scene, cfg, device="cpu")
     start = trainer.field.inv_s().item()
     seen: list[tuple[int, float]] = []
@@ -243,7 +249,8 @@ def test_inv_s_floor_holds_the_sharpness_up_and_lets_it_rise(scene):
     assert seen[-1][1] == pytest.approx(400.0, rel=1e-4)
 
     free = tiny("train.iters=20", "train.lr_variance=0.05", "train.inv_s_floor=30",
-                "train.inv_s_floor_min_steps=0", "train.inv_s_floor_delay=0")
+                "train.inv_s_floor_min_steps=0", "train.inv_s_floor_delay=0",
+                "train.inv_s_floor_blend=0")
     trainer, _ = prepare(scene, free, device="cpu")
     values = []
     trainer.fit([lambda t, lg: values.append(lg["inv_s"])], progress=False)
@@ -257,7 +264,7 @@ def test_inv_s_floor_min_steps_spares_a_short_fit(scene):
     with min_steps far beyond the fit it stays within 0.1% of the initial sharpness, so the
     fit is the same as with no floor at all (to within that)."""
     base = ("train.iters=20", "train.lr_variance=0.0", "train.inv_s_floor=400",
-            "train.inv_s_floor_delay=0")
+            "train.inv_s_floor_delay=0", "train.inv_s_floor_blend=0")
     runs = {}
     for name, extra in {"off": ("train.inv_s_floor=0",),
                         "short": ("train.inv_s_floor_min_steps=0",),
