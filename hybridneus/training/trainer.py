@@ -31,29 +31,13 @@ _ESTIMATE_AT = (10, 30, 100)
 _ESTIMATE_EVERY = 100
 
 
-def lr_factor(step: int, total: int, warmup: int, decay_start: float, decay_final: float) -> float:
-    """Learning-rate multiplier: linear warm-up, constant, then exponential decay.
-
-    Args:
-        step: current step (0-based).
-        total: total steps.
-        warmup: warm-up steps.
-        decay_start: fraction of ``total`` after which the decay starts.
-        decay_final: multiplier reached at ``total``.
-    """
-    f = min(1.0, (step + 1) / warmup) if warmup > 0 else 1.0
-    progress = step / max(total, 1)
-    if progress > decay_start and decay_start < 1.0:
-        f *= decay_final ** min(1.0, (progress - decay_start) / (1.0 - decay_start))
-    return f
-
-
 def onset_weight(step: int, start: int, ramp: int) -> float:
-    """Weight of a loss term that is off before ``start`` and then grows linearly to 1 over
-    ``ramp`` steps (at once when ``ramp <= 0``).
+    """A linear ramp: 0 before ``start``, then ``(step - start + 1) / ramp`` up to 1 (1 at
+    once when ``ramp <= 0``). It weighs the ``hull`` term, warms up the learning rate and
+    blends in the sharpness floor.
 
-    A term switched on at full weight part-way through training (Adam has scaled its steps
-    to the other terms' gradients) jolts the field; one grown from 0 does not.
+    A term or bound switched on at full strength part-way through training (Adam has scaled
+    its steps to the other terms' gradients) jolts the field; one grown from 0 does not.
 
     Args:
         step: current step (0-based).
@@ -65,6 +49,23 @@ def onset_weight(step: int, start: int, ramp: int) -> float:
     if ramp <= 0:
         return 1.0
     return min(1.0, (step - start + 1) / ramp)
+
+
+def lr_factor(step: int, total: int, warmup: int, decay_start: float, decay_final: float) -> float:
+    """Learning-rate multiplier: linear warm-up, constant, then exponential decay.
+
+    Args:
+        step: current step (0-based).
+        total: total steps.
+        warmup: warm-up steps.
+        decay_start: fraction of ``total`` after which the decay starts.
+        decay_final: multiplier reached at ``total``.
+    """
+    f = onset_weight(step, 0, warmup)
+    progress = step / max(total, 1)
+    if progress > decay_start and decay_start < 1.0:
+        f *= decay_final ** min(1.0, (progress - decay_start) / (1.0 - decay_start))
+    return f
 
 
 def inv_s_floor(
@@ -100,9 +101,7 @@ def inv_s_floor(
     else:
         progress = min(1.0, step / max(at * total, min_steps, 1.0))
         value = start * (floor / start) ** progress
-    if blend > 0 and step < delay + blend:
-        value **= (step - delay + 1) / blend
-    return value
+    return value ** onset_weight(step, delay, blend)
 
 
 def _make_adam(groups: list[dict[str, Any]], cfg: Config) -> torch.optim.Adam:
