@@ -100,12 +100,14 @@ def dataset_for(scene: str, mesh: Path | None, args, noise: tuple[float, float])
 # --------------------------------------------------------------------------- one fit (child)
 
 
-def _score_field(field, gt, res: int) -> dict:
+def _score_field(field, gt, res: int, cameras=None) -> dict:
+    """Mesh ``field`` as ``hybridneus mesh`` does (with ``cameras``, the unseen pockets
+    filled) and score it against ``gt``."""
     from hybridneus.evaluation.geometry import chamfer_distance
     from hybridneus.meshing import extract_mesh
 
     t = time.perf_counter()
-    mesh = extract_mesh(field, res=res, progress=False)
+    mesh = extract_mesh(field, res=res, progress=False, cameras=cameras)
     mesh_s = time.perf_counter() - t
     if len(mesh.faces) == 0:
         return {"chamfer": None, "faces": 0, "mesh_s": round(mesh_s, 2)}, mesh
@@ -226,6 +228,7 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
 
     from hybridneus.config import load_config
     from hybridneus.data import load_dataset
+    from hybridneus.data.dataset import read_camera_centres
     from hybridneus.evaluation.geometry import sdf_mae
     from hybridneus.meshing.convert import load_mesh, save_mesh
     from hybridneus.training.runs import build_field
@@ -258,16 +261,20 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
 
     # The untrained field (same seed, same construction as the trainer's) starts the curve.
     torch.manual_seed(cfg.train.seed)
-    initial, _ = _score_field(build_field(cfg, first["scene"]).eval(), gt, res)
+    # Meshes are scored as `hybridneus mesh` makes them: the pockets no camera saw filled.
+    cameras = read_camera_centres(dataset / cfg.data.split)
+    initial, _ = _score_field(build_field(cfg, first["scene"]).eval(), gt, res, cameras)
     curve = [[0.0, 0, initial["chamfer"]]]
     for path in snaps[:-1]:
         f, snap = load(path)
-        score, _ = _score_field(f, gt, res)
+        score, _ = _score_field(f, gt, res, cameras)
         curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), score["chamfer"]])
     field, snap = load(snaps[-1])
-    final, mesh = _score_field(field, gt, res)
+    final, mesh = _score_field(field, gt, res, cameras)
     curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), final["chamfer"]])
-    report = {**info, "run": str(run_dir), "res": res, **final, "curve": curve}
+    plain, _ = _score_field(field, gt, res)  # as scored before session 15, for comparison
+    report = {**info, "run": str(run_dir), "res": res, **final, "curve": curve,
+              "chamfer_unfilled": plain["chamfer"]}
     if mesh is not None and len(mesh.faces):
         save_mesh(mesh, run_dir / "mesh.ply")
         report["sdf_mae"] = float(sdf_mae(mesh, gt).mae)

@@ -61,6 +61,14 @@ def mesh(
             help="Drop closed inner walls of hollows enclosed by matter (never seen by a camera).",
         ),
     ] = True,
+    fill_unseen: Annotated[
+        bool,
+        typer.Option(
+            "--fill-unseen/--keep-unseen",
+            help="Fill pockets of empty space that no training camera saw (e.g. a cave opened "
+            "from an unfilmed underside).",
+        ),
+    ] = True,
     chunk: Annotated[int, typer.Option("--chunk", help="Points per field query.")] = 2**18,
     preview: Annotated[
         bool, typer.Option("--preview/--no-preview", help="Write a PNG preview.")
@@ -74,7 +82,7 @@ def mesh(
     from hybridneus.meshing import MESH_FORMATS, CropVolume, PostprocessOptions, save_mesh
     from hybridneus.meshing.extract import ExtractionStats, extract_mesh
     from hybridneus.meshing.render import save_preview
-    from hybridneus.training.runs import latest_run, load_field
+    from hybridneus.training.runs import latest_run, load_cameras, load_field
 
     fmt = format.lower()
     if fmt not in MESH_FORMATS:
@@ -87,6 +95,9 @@ def mesh(
     if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
         run_dir = latest_run(run_dir)  # a runs root was given: use its latest run
     field = load_field(run_dir, device=device)
+    cameras = load_cameras(run_dir) if fill_unseen and not no_postprocess else None
+    if fill_unseen and not no_postprocess and cameras is None:
+        typer.echo(f"{run_dir}: no camera poses saved or found; unseen space left as it is")
 
     crop = None
     crop_values = getattr(field, "crop", None)
@@ -113,6 +124,7 @@ def mesh(
         chunk=chunk,
         postprocess=options,
         stats=stats,
+        cameras=cameras,
     )
     elapsed = time.perf_counter() - start
     if len(result.faces) == 0:
@@ -124,7 +136,8 @@ def mesh(
     typer.echo(
         f"{path}: {len(result.vertices)} vertices, {len(result.faces)} faces"
         f"{', coloured' if color else ''} ({elapsed:.1f} s, "
-        f"{100 * stats.active_fraction:.1f}% of the {res}-grid evaluated)"
+        f"{100 * stats.active_fraction:.1f}% of the {res}-grid evaluated"
+        f"{f'; {stats.filled_voxels} unseen voxels filled' if stats.filled_voxels else ''})"
     )
     if preview:
         png = save_preview(result, path.with_suffix(".png"))

@@ -62,6 +62,7 @@ def test_fit_only_then_score_runs_elsewhere(tiny_scene, tmp_path):
     assert line["curve"][-1][1] == line["steps"] > 0
     assert line["curve"][0][2] is not None  # the untrained sphere meshes and scores
     assert (moved / "mesh.ply").is_file() == (line["chamfer"] is not None)
+    assert "chamfer_unfilled" in line  # scored with and without the unseen pockets filled
     assert "| device | fast" in proc.stdout  # the report table follows the scoring
 
 

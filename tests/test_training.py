@@ -13,8 +13,15 @@ from conftest import simulate_device
 
 from hybridneus.api import fit, prepare
 from hybridneus.config import apply_overrides, preset_config
+from hybridneus.data import load_dataset
 from hybridneus.training import losses as L
-from hybridneus.training.runs import latest_run, load_checkpoint, load_field
+from hybridneus.training.runs import (
+    latest_run,
+    load_cameras,
+    load_checkpoint,
+    load_field,
+    save_checkpoint,
+)
 from hybridneus.training.trainer import onset_weight
 
 TINY = [
@@ -362,6 +369,23 @@ def test_keyboard_interrupt_saves_a_checkpoint(scene, tmp_path):
     loaded = load_field(field.run_dir, device="cpu")
     pts = np.random.default_rng(0).uniform(-0.3, 0.3, (50, 3)).astype(np.float32)
     assert np.allclose(loaded.sdf(pts), field.sdf(pts), atol=1e-6)
+
+
+def test_runs_keep_their_camera_centres_for_meshing(scene, tmp_path):
+    field = fit(scene, tiny("train.iters=2"), out=tmp_path, device="cpu")
+    poses = load_dataset(scene, splits="train")["train"].c2w
+    saved = load_cameras(field.run_dir)
+    assert saved.shape == (len(poses), 3)
+    assert np.allclose(saved, poses[:, :3, 3])
+    # A run saved before the centres were: they come from the dataset named in config.yaml.
+    state = load_checkpoint(field.run_dir)
+    del state["scene"]["cameras"]
+    save_checkpoint(field.run_dir, state)
+    assert np.allclose(load_cameras(field.run_dir), poses[:, :3, 3])
+    (field.run_dir / "config.yaml").write_text(
+        (field.run_dir / "config.yaml").read_text().replace(str(scene), str(tmp_path / "gone"))
+    )
+    assert load_cameras(field.run_dir) is None
 
 
 def test_same_seed_gives_the_same_field(scene):

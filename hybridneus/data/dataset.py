@@ -181,6 +181,24 @@ def _check_intrinsics(K: np.ndarray, dist: np.ndarray, files: list[Path]) -> Non
     fail(np.abs(K[:, 1, 0]) > 1e-6, "K[1, 0] must be 0 (upper-triangular pinhole matrix)")
 
 
+def read_camera_centres(split_dir: str | os.PathLike) -> np.ndarray:
+    """Camera centres (n_views, 3) from the ``pose/`` files of one split folder, without
+    reading its events.
+
+    Raises:
+        DatasetError: no pose files, or a malformed one (the message names it).
+    """
+    pose_files = _list_files(Path(split_dir) / "pose", ".txt")
+    if not pose_files:
+        raise DatasetError(f"{Path(split_dir) / 'pose'}: no .txt pose files")
+    c2w = np.stack([
+        _read_floats(f, (16,), "row-major 4x4 camera-to-world pose").reshape(4, 4)
+        for f in pose_files
+    ])
+    _check_poses(c2w, pose_files)
+    return c2w[:, :3, 3].copy()
+
+
 def _read_views(split_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     pose_files = _list_files(split_dir / "pose", ".txt")
     intr_files = _list_files(split_dir / "intrinsics", ".txt")

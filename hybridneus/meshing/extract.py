@@ -41,6 +41,7 @@ class ExtractionStats:
     coarse_points: int = 0
     fine_points: int = 0
     slabs: int = 0
+    filled_voxels: int = 0
     times: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -377,6 +378,17 @@ def extract_sdf_mesh(
     return mesh, grid, stats
 
 
+def _examined_box(field_: Field, bounds: Bounds | None, crop: CropVolume | None) -> Bounds:
+    """Where to look for unseen space: the crop's padded box (the given one, else the
+    field's own), else ``bounds``, else the default volume."""
+    values = getattr(field_, "crop", None)
+    if crop is None and values is not None:
+        crop = CropVolume(*(float(v) for v in values))
+    if crop is not None:
+        return crop.padded_bounds()
+    return bounds if bounds is not None else DEFAULT_BOUNDS
+
+
 def extract_mesh(
     field_: Field,
     res: int = 300,
@@ -390,10 +402,14 @@ def extract_mesh(
     progress: bool = True,
     stats: ExtractionStats | None = None,
     color_normals: str = "mesh",
+    cameras: np.ndarray | None = None,
+    fill_radius: float = 0.1,
 ) -> trimesh.Trimesh:
     """Extract the zero level of ``field_`` as a triangle mesh in world coordinates.
 
-    Marching cubes on a grid with ``res`` points along the longest side of the volume
+    With ``cameras``, the pockets of empty space that no camera sees are first filled
+    (:mod:`~hybridneus.meshing.unseen`). Then marching cubes on a grid with ``res`` points
+    along the longest side of the volume
     (narrow-band evaluation, bounded memory; see :func:`extract_sdf_mesh`), then clean-up
     (:func:`~hybridneus.meshing.postprocess.postprocess_mesh`), then, with ``color``, vertex
     colours from the colour head (:func:`~hybridneus.meshing.color.vertex_colors`).
@@ -413,6 +429,12 @@ def extract_mesh(
         stats: if given, filled with counts and timings.
         color_normals: view direction for colours: ``"mesh"`` (-vertex normal, forward
             queries only) or ``"gradient"`` (-SDF gradient at each grid corner, slower).
+        cameras: centres (n_views, 3) of the training cameras; when given, empty space that
+            they cannot see and that matter nearly surrounds is filled before meshing
+            (:func:`~hybridneus.meshing.unseen.unseen_space`, examined over the crop's box,
+            or ``bounds``). None meshes the field as it is.
+        fill_radius: the closing radius of that fill, as a fraction of the examined box's
+            longest side.
 
     Returns:
         ``trimesh.Trimesh`` with outward normals; ``visual.vertex_colors`` set when ``color``.
@@ -433,9 +455,22 @@ def extract_mesh(
     options = postprocess if postprocess is not None else PostprocessOptions()
     if clip and crop is not None and options.clip is None and options.enabled:
         options = dataclasses.replace(options, clip=crop)
+    source, unseen_s, filled = field_, 0.0, 0
+    if cameras is not None:
+        from hybridneus.meshing.unseen import FilledField, unseen_space
+
+        t0 = time.perf_counter()
+        unseen = unseen_space(field_, cameras, _examined_box(field_, bounds, crop),
+                              close_radius=fill_radius, chunk=chunk)
+        unseen_s, filled = time.perf_counter() - t0, unseen.filled
+        if unseen.filled:
+            source = FilledField(field_, unseen)
     mesh, grid, run_stats = extract_sdf_mesh(
-        field_, res, bounds, crop, chunk=chunk, narrow_band=narrow_band, progress=progress
+        source, res, bounds, crop, chunk=chunk, narrow_band=narrow_band, progress=progress
     )
+    run_stats.filled_voxels = filled
+    if cameras is not None:
+        run_stats.times["unseen"] = unseen_s
     if options.clip is not None and options.clip_margin is None:
         options = dataclasses.replace(options, clip_margin=0.5 * grid.voxel)
     if options.clip is not None and options.trim_tolerance is None:

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from hybridneus.config import Config, load_config
@@ -151,3 +152,28 @@ def load_field(run_dir: str | os.PathLike, device: str = "auto"):
         raise RunError(f"{run_dir / CHECKPOINT}: does not match config.yaml ({first})") from None
     field.update_step(int(state["step"]), int(state["total_steps"]))
     return field.to(dev).eval()
+
+
+def load_cameras(run_dir: str | os.PathLike) -> np.ndarray | None:
+    """Centres (n_views, 3) of the cameras a run was trained from, or ``None``.
+
+    Runs save them in their checkpoint; for older runs they are read from the poses of the
+    dataset that ``config.yaml`` names, when that folder is still there.
+
+    Raises:
+        RunError: missing or unreadable run folder / checkpoint.
+    """
+    from hybridneus.data.dataset import read_camera_centres
+    from hybridneus.errors import DatasetError
+
+    run_dir = Path(run_dir)
+    if not (run_dir / CHECKPOINT).is_file() and (run_dir / LATEST).is_file():
+        run_dir = latest_run(run_dir)
+    saved = load_checkpoint(run_dir).get("scene", {}).get("cameras")
+    if saved:
+        return np.asarray(saved, dtype=np.float64).reshape(-1, 3)
+    try:
+        cfg = load_run_config(run_dir)
+        return read_camera_centres(Path(cfg.data.path) / cfg.data.split)
+    except (RunError, DatasetError, TypeError):
+        return None

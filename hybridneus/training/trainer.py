@@ -150,6 +150,8 @@ class Trainer:
             "background": [float(c) for c in p.background],
             "crop": [float(p.crop_r), float(p.crop_y_min), float(p.crop_y_max)],
             "tonemap_eps": float(p.tonemap_eps),
+            # where the cameras stood: meshing fills the space none of them saw
+            "cameras": self.split.c2w[:, :3, 3].astype(float).tolist(),
         }
         self.field = HybridField(
             cfg.grid, cfg.field, tuple(self.scene["background"]), tuple(self.scene["crop"])
