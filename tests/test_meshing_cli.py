@@ -74,3 +74,26 @@ def test_postprocess_flags_reach_the_postprocessing(runs, tmp_path, cli, monkeyp
                         "--no-preview", "--device", "cpu", *flags)
         assert code == 0, err
     assert seen == [(False, True), (True, True), (False, False), (False, True)]
+
+
+def test_mesh_fills_unseen_space_from_the_runs_cameras_unless_told_not_to(
+    runs, tmp_path, cli, monkeypatch
+):
+    import hybridneus.meshing.extract as extract
+    from hybridneus.training.runs import latest_run, load_cameras
+
+    seen = []
+    real = extract.extract_mesh
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs["cameras"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(extract, "extract_mesh", spy)
+    for flags in ([], ["--keep-unseen"], ["--no-postprocess"]):
+        code, err = cli(str(runs), "--res", "32", "--out", str(tmp_path / f"{len(seen)}.ply"),
+                        "--no-preview", "--device", "cpu", *flags)
+        assert code == 0, err
+    expected = load_cameras(latest_run(runs))
+    assert seen[0] is not None and np.allclose(seen[0], expected)
+    assert seen[1] is None and seen[2] is None

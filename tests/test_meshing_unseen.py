@@ -27,6 +27,18 @@ class CaveField(SphereField):
         return torch.maximum(super()._sdf(points), -shaft)
 
 
+class SlitField(SphereField):
+    """A ball of radius 0.5 with a slit 0.05 wide and 0.4 long cut from below up to y = 0.2."""
+
+    def __init__(self) -> None:
+        super().__init__(0.5)
+
+    def _sdf(self, points: torch.Tensor) -> torch.Tensor:
+        slit = torch.maximum(points[:, 0].abs() - 0.025, points[:, 2].abs() - 0.2)
+        slit = torch.maximum(slit, points[:, 1] - 0.2)
+        return torch.maximum(super()._sdf(points), -slit)
+
+
 class FlatBottomField(SphereField):
     """A ball of radius 0.5 cut flat at y = -0.25."""
 
@@ -76,6 +88,15 @@ def test_the_open_wedge_below_a_flat_underside_stays_empty():
     assert unseen.hidden > 0 and unseen.filled == 0
     mesh = extract_mesh(field, res=96, bounds=BOX, cameras=ABOVE, progress=False)
     assert mesh.vertices[:, 1].min() > -0.25 - 0.02
+
+
+def test_min_thickness_leaves_thin_pockets_and_fills_thick_ones():
+    # the slit is about 2 voxels wide at res 64 over the 1.4-wide box, the shaft about 7
+    assert unseen_space(SlitField(), ABOVE, BOX, res=64, min_thickness=0).filled > 0
+    assert unseen_space(SlitField(), ABOVE, BOX, res=64, min_thickness=4).filled == 0
+    cave = unseen_space(CaveField(), ABOVE, BOX, res=64, min_thickness=0)
+    thick = unseen_space(CaveField(), ABOVE, BOX, res=64, min_thickness=4)
+    assert thick.filled > 0.8 * cave.filled
 
 
 def test_the_filled_region_is_a_signed_distance_on_its_grid():

@@ -4,6 +4,7 @@ Public API::
 
     from hybridneus.meshing import extract_mesh, PostprocessOptions, CropVolume, save_mesh
     mesh = extract_mesh(field, res=300, color=True)      # trimesh.Trimesh, world coordinates
+    mesh = extract_mesh(field, cameras=centres)          # fill the pockets no camera saw
     save_mesh(mesh, "mesh.ply")
 
 See docs/meshing.md.
@@ -20,13 +21,16 @@ from hybridneus.meshing.convert import (
 )
 from hybridneus.meshing.extract import ExtractionStats, extract_mesh, extract_sdf_mesh
 from hybridneus.meshing.postprocess import PostprocessOptions, postprocess_mesh
+from hybridneus.meshing.unseen import FilledField, UnseenSpace, unseen_space
 from hybridneus.meshing.volume import CropVolume, VoxelGrid
 
 __all__ = [
     "MESH_FORMATS",
     "CropVolume",
     "ExtractionStats",
+    "FilledField",
     "PostprocessOptions",
+    "UnseenSpace",
     "VoxelGrid",
     "extract_mesh",
     "extract_sdf_mesh",
@@ -37,4 +41,5 @@ __all__ = [
     "mesh_to_open3d",
     "postprocess_mesh",
     "save_mesh",
+    "unseen_space",
 ]

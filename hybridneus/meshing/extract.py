@@ -404,6 +404,7 @@ def extract_mesh(
     color_normals: str = "mesh",
     cameras: np.ndarray | None = None,
     fill_radius: float = 0.1,
+    fill_thickness: float = 4.0,
 ) -> trimesh.Trimesh:
     """Extract the zero level of ``field_`` as a triangle mesh in world coordinates.
 
@@ -435,6 +436,8 @@ def extract_mesh(
             or ``bounds``). None meshes the field as it is.
         fill_radius: the closing radius of that fill, as a fraction of the examined box's
             longest side.
+        fill_thickness: parts of the fill thinner than this many voxels of its 128-point
+            grid are left empty (:func:`~hybridneus.meshing.unseen.unseen_space`).
 
     Returns:
         ``trimesh.Trimesh`` with outward normals; ``visual.vertex_colors`` set when ``color``.
@@ -461,7 +464,8 @@ def extract_mesh(
 
         t0 = time.perf_counter()
         unseen = unseen_space(field_, cameras, _examined_box(field_, bounds, crop),
-                              close_radius=fill_radius, chunk=chunk)
+                              close_radius=fill_radius, min_thickness=fill_thickness,
+                              chunk=chunk)
         unseen_s, filled = time.perf_counter() - t0, unseen.filled
         if unseen.filled:
             source = FilledField(field_, unseen)

@@ -8,7 +8,8 @@ walls that are never rendered and so never corrected. Chamfer distance counts th
 :func:`unseen_space` finds the empty space (SDF > 0) that is hidden from every camera by the
 field's own surface, keeps the part that lies within the morphological closing of the
 field's matter (pockets that matter nearly surrounds, rather than the open wedge below a flat
-underside, which the closing leaves out), and returns the signed distance to that region.
+underside, which the closing leaves out), drops the slivers of it thinner than a few voxels,
+and returns the signed distance to that region.
 :class:`FilledField` wraps a field so that its SDF is ``min(sdf, distance)``: the union of
 the field's matter and the filled pockets. Mesh extraction runs on the wrapped field.
 
@@ -100,12 +101,22 @@ def _closing(solid: np.ndarray, radius: float) -> np.ndarray:
     return (ndimage.distance_transform_edt(grown) > radius) | solid
 
 
+def _opening(region: np.ndarray, radius: float) -> np.ndarray:
+    """Morphological opening of ``region`` with a ball of ``radius`` voxels: the parts of it
+    that such a ball fits in."""
+    from scipy import ndimage
+
+    core = ndimage.distance_transform_edt(region) > radius
+    return (ndimage.distance_transform_edt(~core) <= radius) & region
+
+
 def unseen_space(
     field_: Field,
     cameras: np.ndarray,
     bounds: Bounds,
     res: int = 128,
     close_radius: float = 0.1,
+    min_thickness: float = 4.0,
     max_cameras: int = 192,
     chunk: int = 2**18,
 ) -> UnseenSpace:
@@ -118,6 +129,9 @@ def unseen_space(
         res: grid points along the box's longest side.
         close_radius: radius of the closing ball, as a fraction of the box's longest side;
             hidden space farther than this from matter on some side is left empty.
+        min_thickness: in grid voxels; parts of the fill that a ball of this diameter does
+            not fit in (a morphological opening) are left empty: thin slivers along a
+            surface, such as the shallow hidden strip under an uneven flat bottom.
         max_cameras: cameras tested (spread by :func:`spread_cameras`).
         chunk: points per field query.
 
@@ -148,6 +162,8 @@ def unseen_space(
     radius = close_radius * (max(shape) - 1)
     if hidden.size:
         fill &= _closing(solid, radius)
+    if min_thickness > 0 and fill.any():
+        fill = _opening(fill, 0.5 * min_thickness)
     # The box's faces stay empty: what reaches them is cut there, as the crop cuts matter.
     fill[[0, -1]] = False
     fill[:, [0, -1]] = False
@@ -186,7 +202,10 @@ class FilledField:
 
     def __getattr__(self, name: str):
         # crop, background and the rest of the wrapped field's attributes
-        return getattr(self.__dict__["field"], name)
+        field_ = self.__dict__.get("field")
+        if field_ is None:
+            raise AttributeError(name)
+        return getattr(field_, name)
 
     def _distance(self, points: torch.Tensor) -> torch.Tensor:
         u = (points.float() - self._origin) / self._span * 2 - 1
