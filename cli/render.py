@@ -90,9 +90,13 @@ def _render_orbit(field, run_dir: Path, out: Path, frames: int, size: int) -> Pa
     from hybridneus.meshing.extract import extract_mesh
     from hybridneus.meshing.render import render_views
     from hybridneus.progress import make_progress
+    from hybridneus.training.runs import load_cameras
 
     meshes = sorted(run_dir.glob("mesh_*.ply"), key=lambda p: p.stat().st_mtime)
-    mesh = load_mesh(meshes[-1]) if meshes else extract_mesh(field, res=160, color=True)
+    if meshes:
+        mesh = load_mesh(meshes[-1])
+    else:  # meshed as `hybridneus mesh` would
+        mesh = extract_mesh(field, res=160, color=True, cameras=load_cameras(run_dir))
     images = []
     with make_progress("frame") as progress:
         task = progress.add_task("orbit", total=frames)
