@@ -191,12 +191,17 @@ def read_camera_centres(split_dir: str | os.PathLike) -> np.ndarray:
     pose_files = _list_files(Path(split_dir) / "pose", ".txt")
     if not pose_files:
         raise DatasetError(f"{Path(split_dir) / 'pose'}: no .txt pose files")
-    c2w = np.stack([
-        _read_floats(f, (16,), "row-major 4x4 camera-to-world pose").reshape(4, 4)
-        for f in pose_files
-    ])
+    c2w = _read_pose_matrices(pose_files)
     _check_poses(c2w, pose_files)
     return c2w[:, :3, 3].copy()
+
+
+def _read_pose_matrices(pose_files: list[Path]) -> np.ndarray:
+    """(n, 4, 4) camera-to-world matrices, one per file, unchecked (see :func:`_check_poses`)."""
+    c2w = np.empty((len(pose_files), 4, 4))
+    for i, f in enumerate(pose_files):
+        c2w[i] = _read_floats(f, (16,), "row-major 4x4 camera-to-world pose").reshape(4, 4)
+    return c2w
 
 
 def _read_views(split_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
@@ -210,9 +215,7 @@ def _read_views(split_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, li
             f"intrinsics/ has {len(intr_files)}"
         )
     n = len(pose_files)
-    c2w = np.empty((n, 4, 4))
-    for i, f in enumerate(pose_files):
-        c2w[i] = _read_floats(f, (16,), "row-major 4x4 camera-to-world pose").reshape(4, 4)
+    c2w = _read_pose_matrices(pose_files)
     K = np.empty((n, 3, 3))
     dist = np.zeros((n, 2))
     for i, f in enumerate(intr_files):

@@ -84,7 +84,7 @@ def _hidden_from_all(
     for centre in cameras:
         if candidates.size == 0:
             break
-        origins = grid.points(*np.unravel_index(candidates, shape)).astype(np.float32)
+        origins = grid.points(*np.unravel_index(candidates, shape))  # float32
         dirs = centre.astype(np.float32) - origins
         dist = np.linalg.norm(dirs, axis=1)
         dirs /= np.maximum(dist, 1e-12)[:, None]

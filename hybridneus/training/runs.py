@@ -120,6 +120,14 @@ def build_field(cfg: Config, scene: dict[str, Any]):
     )
 
 
+def _resolve_run(run_dir: str | os.PathLike) -> Path:
+    """``run_dir`` itself, or the latest run when it is a runs root with a ``latest`` file."""
+    run_dir = Path(run_dir)
+    if not (run_dir / CHECKPOINT).is_file() and (run_dir / LATEST).is_file():
+        return latest_run(run_dir)
+    return run_dir
+
+
 def load_field(run_dir: str | os.PathLike, device: str = "auto"):
     """Load the trained field of a run folder, in eval mode, on ``device``.
 
@@ -135,9 +143,7 @@ def load_field(run_dir: str | os.PathLike, device: str = "auto"):
     """
     from hybridneus.device import resolve_device
 
-    run_dir = Path(run_dir)
-    if not (run_dir / CHECKPOINT).is_file() and (run_dir / LATEST).is_file():
-        run_dir = latest_run(run_dir)
+    run_dir = _resolve_run(run_dir)
     dev = resolve_device(device)
     state = load_checkpoint(run_dir)
     try:
@@ -166,9 +172,7 @@ def load_cameras(run_dir: str | os.PathLike) -> np.ndarray | None:
     from hybridneus.data.dataset import read_camera_centres
     from hybridneus.errors import DatasetError
 
-    run_dir = Path(run_dir)
-    if not (run_dir / CHECKPOINT).is_file() and (run_dir / LATEST).is_file():
-        run_dir = latest_run(run_dir)
+    run_dir = _resolve_run(run_dir)
     saved = load_checkpoint(run_dir).get("scene", {}).get("cameras")
     if saved:
         return np.asarray(saved, dtype=np.float64).reshape(-1, 3)
