@@ -14,6 +14,7 @@ from conftest import simulate_device
 from hybridneus.api import fit, prepare
 from hybridneus.config import apply_overrides, preset_config
 from hybridneus.data import load_dataset
+from hybridneus.errors import RunError
 from hybridneus.training import losses as L
 from hybridneus.training.runs import (
     latest_run,
@@ -377,8 +378,12 @@ def test_runs_keep_their_camera_centres_for_meshing(scene, tmp_path):
     saved = load_cameras(field.run_dir)
     assert saved.shape == (len(poses), 3)
     assert np.allclose(saved, poses[:, :3, 3])
-    # A run saved before the centres were: they come from the dataset named in config.yaml.
     state = load_checkpoint(field.run_dir)
+    state["scene"]["cameras"][0][0] = float("nan")
+    save_checkpoint(field.run_dir, state)
+    with pytest.raises(RunError, match="last.pt: camera centres hold NaN"):
+        load_cameras(field.run_dir)
+    # A run saved before the centres were: they come from the dataset named in config.yaml.
     del state["scene"]["cameras"]
     save_checkpoint(field.run_dir, state)
     assert np.allclose(load_cameras(field.run_dir), poses[:, :3, 3])

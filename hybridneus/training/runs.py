@@ -167,7 +167,7 @@ def load_cameras(run_dir: str | os.PathLike) -> np.ndarray | None:
     dataset that ``config.yaml`` names, when that folder is still there.
 
     Raises:
-        RunError: missing or unreadable run folder / checkpoint.
+        RunError: missing or unreadable run folder / checkpoint, or non-finite saved centres.
     """
     from hybridneus.data.dataset import read_camera_centres
     from hybridneus.errors import DatasetError
@@ -175,7 +175,10 @@ def load_cameras(run_dir: str | os.PathLike) -> np.ndarray | None:
     run_dir = _resolve_run(run_dir)
     saved = load_checkpoint(run_dir).get("scene", {}).get("cameras")
     if saved:
-        return np.asarray(saved, dtype=np.float64).reshape(-1, 3)
+        centres = np.asarray(saved, dtype=np.float64).reshape(-1, 3)
+        if not np.isfinite(centres).all():
+            raise RunError(f"{run_dir / CHECKPOINT}: camera centres hold NaN or inf")
+        return centres
     try:
         cfg = load_run_config(run_dir)
         return read_camera_centres(Path(cfg.data.path) / cfg.data.split)
