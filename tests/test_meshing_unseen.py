@@ -149,3 +149,16 @@ def test_unseen_space_rejects_bad_cameras():
         unseen_space(CaveField(), np.zeros((0, 3)), BOX)
     with pytest.raises(ValueError, match="cameras"):
         unseen_space(CaveField(), np.array([[np.nan, 0.0, 3.0]]), BOX)
+
+
+def test_filled_field_takes_numpy_and_tensors_like_a_trained_field():
+    field = CaveField()
+    wrapped = FilledField(field, unseen_space(field, ABOVE, BOX, res=64))
+    pts = np.array([[0.0, -0.1, 0.0], [0.0, 0.3, 0.0], [5.0, 5.0, 5.0]], dtype=np.float64)
+    d = wrapped.sdf(pts)
+    assert isinstance(d, np.ndarray) and d.shape == (3,)
+    assert np.allclose(d, wrapped.sdf(torch.from_numpy(pts)).numpy())
+    assert d[0] < 0  # the filled cave
+    value, grad = wrapped.sdf_and_gradient(pts)
+    assert isinstance(value, np.ndarray) and isinstance(grad, np.ndarray)
+    assert np.allclose(value, d) and grad.shape == (3, 3)

@@ -15,6 +15,7 @@ from hybridneus.api import fit, prepare
 from hybridneus.config import apply_overrides, preset_config
 from hybridneus.data import load_dataset
 from hybridneus.errors import RunError
+from hybridneus.meshing import extract_mesh
 from hybridneus.training import losses as L
 from hybridneus.training.runs import (
     latest_run,
@@ -353,6 +354,23 @@ def test_resume_continues_with_identical_state(scene, tmp_path):
     assert steps == sorted(set(steps)) and steps[-1] == 6
 
 
+def test_resume_from_a_checkpoint_saved_on_another_kind_of_device(scene, tmp_path, caplog):
+    # A CUDA generator's state is 16 bytes (seed and offset); a CPU one's is far longer, so
+    # a GPU run resumed on a CPU (or the reverse) cannot restore it.
+    cfg = tiny("train.iters=6", "train.checkpoint_every=3", "train.seed=5")
+    first = fit(scene, cfg, [_stop_at(3)], out=tmp_path, device="cpu")
+    state = load_checkpoint(first.run_dir)
+    at_3 = {k: v.clone() for k, v in state["model"].items()}
+    state["generator"] = torch.zeros(16, dtype=torch.uint8)
+    save_checkpoint(first.run_dir, state)
+    with caplog.at_level("INFO", logger="hybridneus"):
+        resumed = fit(None, None, resume=first.run_dir, device="cpu")
+    assert resumed.trainer_step == 6 and not resumed.interrupted
+    assert "saved on another kind of device" in caplog.text
+    after = resumed.state_dict()
+    assert any(not torch.equal(at_3[k], after[k]) for k in at_3)  # it went on training
+
+
 def _stop_at(step: int):
     def callback(trainer, logs):
         if trainer.step == step:
@@ -430,6 +448,14 @@ def test_fit_runs_on_cuda(scene, tmp_path):
     loaded = load_field(field.run_dir, device="cpu")
     pts = np.random.default_rng(0).uniform(-0.3, 0.3, (20, 3)).astype(np.float32)
     assert np.allclose(loaded.sdf(pts), field.sdf(pts), atol=1e-4)
+    # meshing with the unseen-space fill on the GPU field, then the CUDA run resumed on CUDA
+    # and on the CPU
+    mesh = extract_mesh(field, res=32, cameras=load_cameras(field.run_dir), progress=False)
+    assert len(mesh.faces) > 0
+    for device, iters in (("cuda", 6), ("cpu", 8)):
+        more = fit(None, None, overrides=[f"train.iters={iters}"], resume=field.run_dir,
+                   device=device)
+        assert more.trainer_step == iters and more.device.type == device
 
 
 def test_rgb_supervision_fits_the_frames(scene):

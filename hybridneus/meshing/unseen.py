@@ -19,6 +19,7 @@ All of this only reads the trained field; nothing is written back to it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -186,7 +187,8 @@ class FilledField:
 
     ``sdf`` is ``min(field_.sdf, unseen distance)``, the distance trilinearly interpolated
     on its grid (outside the grid, ``field_.sdf`` alone); colours and gradients are
-    ``field_``'s own.
+    ``field_``'s own. Like a trained field, it takes numpy (and returns numpy) or torch
+    tensors on any device (and returns tensors on ``device``).
     """
 
     def __init__(self, field_: Field, unseen: UnseenSpace) -> None:
@@ -217,16 +219,29 @@ class FilledField:
         beyond = ((u < -1) | (u > 1)).any(dim=1)
         return torch.where(beyond, torch.full_like(d, float("inf")), d)
 
-    def sdf(self, points: torch.Tensor) -> torch.Tensor:
-        """``min(field.sdf, distance to the filled pockets)`` at ``points`` (n, 3) -> (n,)."""
-        own = self.field.sdf(points)
-        return torch.minimum(own, self._distance(points).to(own.dtype).reshape(own.shape))
+    def _as_tensor(self, points: Any) -> tuple[torch.Tensor, bool]:
+        if isinstance(points, torch.Tensor):
+            return points.to(self.device, torch.float32), False
+        array = np.ascontiguousarray(points, dtype=np.float32)
+        return torch.from_numpy(array).to(self.device), True
 
-    def sdf_and_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def sdf(self, points: Any) -> Any:
+        """``min(field.sdf, distance to the filled pockets)`` at ``points`` (n, 3) -> (n,)."""
+        pts, was_numpy = self._as_tensor(points)
+        own = torch.as_tensor(self.field.sdf(pts), device=self.device)
+        out = torch.minimum(own, self._distance(pts).to(own.dtype).reshape(own.shape))
+        return out.cpu().numpy() if was_numpy else out
+
+    def sdf_and_gradient(self, points: Any) -> tuple[Any, Any]:
         """The wrapped field's SDF gradient; the SDF value as :meth:`sdf`."""
-        own, grad = self.field.sdf_and_gradient(points)
-        filled = self._distance(points.detach()).to(own.dtype).reshape(own.shape)
-        return torch.minimum(own, filled), grad
+        pts, was_numpy = self._as_tensor(points)
+        own, grad = self.field.sdf_and_gradient(pts)
+        own = torch.as_tensor(own, device=self.device)
+        filled = self._distance(pts.detach()).to(own.dtype).reshape(own.shape)
+        out = torch.minimum(own, filled)
+        if was_numpy:
+            return out.cpu().numpy(), torch.as_tensor(grad).cpu().numpy()
+        return out, grad
 
     def color(self, points: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """The wrapped field's colour."""

@@ -7,6 +7,7 @@ same optimiser moments, same random draws).
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Iterable
@@ -236,7 +237,18 @@ class Trainer:
         self.occupancy.occupied.copy_(state["occupancy"])
         self.optimizer.load_state_dict(state["optimizer"])
         torch.set_rng_state(state["torch_rng"])
-        self.generator.set_state(state["generator"])
+        try:
+            self.generator.set_state(state["generator"])
+        except RuntimeError:
+            # Saved on the other kind of device: CPU and CUDA generator states differ in
+            # size and cannot be carried across, so the sample draws continue from a new
+            # stream (everything else resumes exactly).
+            self.generator.manual_seed(self.cfg.train.seed + 1 + int(state["step"]))
+            logging.getLogger("hybridneus").info(
+                "resumed on %s from a checkpoint saved on another kind of device: ray "
+                "jitter and random points continue from a new random stream",
+                self.device.type,
+            )
         self.windows.rng.bit_generator.state = state["window_rng"]
         if self.frames is not None and state.get("frame_rng") is not None:
             self.frames.rng.bit_generator.state = state["frame_rng"]
@@ -294,8 +306,6 @@ class Trainer:
         its surface). Views at the horizon do see that space against the background, and
         the hull of the event silhouettes records it as empty.
         """
-        import logging
-
         lw = self.cfg.loss
         if lw.lambda_hull <= 0:
             return None
