@@ -110,7 +110,7 @@ class TrainConfig:
 
     iters: int = 2000  # steps (a --minutes budget re-estimates this from the measured speed)
     minutes: float = 0.0  # wall-clock budget in minutes (0: no limit; stops at iters)
-    n_rays: int = 256  # pixels per step, each rendered at the window's start and end pose
+    n_rays: int = 0  # pixels per step, each at both window ends (0: 256 on CPU, 1024 on CUDA)
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)
     inv_s_floor: float = 200.0  # lowest inv_s allowed by inv_s_floor_at (0: no floor)
@@ -241,6 +241,26 @@ def preset_config(name: str) -> Config:
 
 # ---------------------------------------------------------------------------------------
 # Typed assignment
+
+
+# A CPU step's cost grows with the batch; a GPU step's barely does (it is bound by kernel
+# launches), and 1,024 pixels gave the best 2-minute H100 fits (docs/benchmarks/training.md).
+N_RAYS_BY_DEVICE = {"cpu": 256, "cuda": 1024}
+
+
+def rays_per_step(cfg: Config, device: Any) -> int:
+    """``train.n_rays``, or for 0 the device's default (256 on a CPU, 1024 on CUDA).
+
+    Raises:
+        ConfigError: ``train.n_rays`` is negative.
+    """
+    n = cfg.train.n_rays
+    if n < 0:
+        raise ConfigError(f"train.n_rays: expected >= 0 (0: the device's default), got {n}")
+    if n > 0:
+        return n
+    kind = getattr(device, "type", str(device).split(":")[0])
+    return N_RAYS_BY_DEVICE.get(kind, N_RAYS_BY_DEVICE["cpu"])
 
 
 def _type_name(tp: Any) -> str:

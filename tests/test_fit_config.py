@@ -13,6 +13,7 @@ from hybridneus.config import (
     config_table,
     load_config,
     preset_config,
+    rays_per_step,
     save_config,
 )
 from hybridneus.errors import ConfigError
@@ -25,6 +26,17 @@ def test_presets_differ_where_documented():
     assert paper.field.sdf_layers == 8 and paper.field.sdf_skip == [4]
     with pytest.raises(ConfigError, match="unknown preset"):
         preset_config("fastest")
+
+
+def test_pixels_per_step_default_to_the_device():
+    fast = preset_config("fast")
+    assert fast.train.n_rays == 0
+    assert rays_per_step(fast, "cpu") == 256
+    assert rays_per_step(fast, "cuda:1") == 1024
+    assert rays_per_step(preset_config("quality"), "cuda") == 512  # a preset's own count
+    assert rays_per_step(apply_overrides(fast, ["train.n_rays=64"]), "cuda") == 64
+    with pytest.raises(ConfigError, match="train.n_rays: expected >= 0"):
+        rays_per_step(apply_overrides(preset_config("fast"), ["train.n_rays=-5"]), "cpu")
 
 
 def test_overrides_are_typed():

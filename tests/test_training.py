@@ -12,9 +12,9 @@ import torch
 from conftest import simulate_device
 
 from hybridneus.api import fit, prepare
-from hybridneus.config import apply_overrides, preset_config
+from hybridneus.config import apply_overrides, load_config, preset_config
 from hybridneus.data import load_dataset
-from hybridneus.errors import RunError
+from hybridneus.errors import ConfigError, RunError
 from hybridneus.meshing import extract_mesh
 from hybridneus.training import losses as L
 from hybridneus.training.runs import (
@@ -409,6 +409,14 @@ def test_runs_keep_their_camera_centres_for_meshing(scene, tmp_path):
         (field.run_dir / "config.yaml").read_text().replace(str(scene), str(tmp_path / "gone"))
     )
     assert load_cameras(field.run_dir) is None
+
+
+def test_the_device_default_batch_is_written_to_the_run_config(scene, tmp_path):
+    cfg = apply_overrides(tiny("train.iters=1"), ["train.n_rays=0"])
+    field = fit(scene, cfg, out=tmp_path, device="cpu")
+    assert load_config(field.run_dir / "config.yaml").train.n_rays == 256
+    with pytest.raises(ConfigError, match="train.n_rays"):
+        fit(scene, apply_overrides(tiny(), ["train.n_rays=-1"]), device="cpu")
 
 
 def test_same_seed_gives_the_same_field(scene):

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from hybridneus.config import Config
+from hybridneus.config import Config, rays_per_step
 from hybridneus.data.hull import NOTHING_OUTLINED, FreeSpace, event_free_space
 from hybridneus.model.field import HybridField, crop_aabb, crop_sdf
 from hybridneus.rendering.occupancy import OccupancyGrid
@@ -133,6 +133,13 @@ class Trainer:
 
         self.cfg = cfg
         self.device = torch.device(device)
+        n_rays = rays_per_step(cfg, self.device)
+        if n_rays != cfg.train.n_rays:  # 0: the device's default; config.yaml records it
+            cfg.train.n_rays = n_rays
+            logging.getLogger("hybridneus").info(
+                "%d pixels per step on %s (train.n_rays=0: the device's default)",
+                n_rays, self.device.type,
+            )
         self.dataset = dataset
         if cfg.data.split not in dataset.splits:
             from hybridneus.errors import ConfigError
