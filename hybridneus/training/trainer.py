@@ -252,8 +252,9 @@ class Trainer:
             # stream (everything else resumes exactly).
             self.generator.manual_seed(self.cfg.train.seed + 1 + int(state["step"]))
             logging.getLogger("hybridneus").info(
-                "resumed on %s from a checkpoint saved on another kind of device: ray "
-                "jitter and random points continue from a new random stream",
+                "resumed on %s; the checkpoint's sampler state does not fit this device (saved "
+                "on another kind of device?): ray jitter and random points continue from a "
+                "new random stream",
                 self.device.type,
             )
         self.windows.rng.bit_generator.state = state["window_rng"]
