@@ -259,8 +259,7 @@ def rays_per_step(cfg: Config, device: Any) -> int:
         raise ConfigError(f"train.n_rays: expected >= 0 (0: the device's default), got {n}")
     if n > 0:
         return n
-    kind = getattr(device, "type", str(device).split(":")[0])
-    return N_RAYS_BY_DEVICE.get(kind, N_RAYS_BY_DEVICE["cpu"])
+    return N_RAYS_BY_DEVICE.get(str(device).split(":")[0], N_RAYS_BY_DEVICE["cpu"])
 
 
 def _type_name(tp: Any) -> str:

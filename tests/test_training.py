@@ -412,11 +412,10 @@ def test_runs_keep_their_camera_centres_for_meshing(scene, tmp_path):
 
 
 def test_the_device_default_batch_is_written_to_the_run_config(scene, tmp_path):
-    cfg = apply_overrides(tiny("train.iters=1"), ["train.n_rays=0"])
-    field = fit(scene, cfg, out=tmp_path, device="cpu")
+    field = fit(scene, tiny("train.iters=1", "train.n_rays=0"), out=tmp_path, device="cpu")
     assert load_config(field.run_dir / "config.yaml").train.n_rays == 256
     with pytest.raises(ConfigError, match="train.n_rays"):
-        fit(scene, apply_overrides(tiny(), ["train.n_rays=-1"]), device="cpu")
+        fit(scene, tiny("train.n_rays=-1"), device="cpu")
 
 
 def test_same_seed_gives_the_same_field(scene):

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from hybridneus.meshing.volume import Bounds, VoxelGrid
-from hybridneus.model.protocol import Field
+from hybridneus.model.protocol import Field, as_points
 
 
 @dataclass
@@ -219,28 +219,21 @@ class FilledField:
         beyond = ((u < -1) | (u > 1)).any(dim=1)
         return torch.where(beyond, torch.full_like(d, float("inf")), d)
 
-    def _as_tensor(self, points: Any) -> tuple[torch.Tensor, bool]:
-        if isinstance(points, torch.Tensor):
-            return points.to(self.device, torch.float32), False
-        array = np.ascontiguousarray(points, dtype=np.float32)
-        return torch.from_numpy(array).to(self.device), True
-
     def sdf(self, points: Any) -> Any:
         """``min(field.sdf, distance to the filled pockets)`` at ``points`` (n, 3) -> (n,)."""
-        pts, was_numpy = self._as_tensor(points)
-        own = torch.as_tensor(self.field.sdf(pts), device=self.device)
+        pts, was_numpy = as_points(points, self.device)
+        own = self.field.sdf(pts)
         out = torch.minimum(own, self._distance(pts).to(own.dtype).reshape(own.shape))
         return out.cpu().numpy() if was_numpy else out
 
     def sdf_and_gradient(self, points: Any) -> tuple[Any, Any]:
         """The wrapped field's SDF gradient; the SDF value as :meth:`sdf`."""
-        pts, was_numpy = self._as_tensor(points)
+        pts, was_numpy = as_points(points, self.device)
         own, grad = self.field.sdf_and_gradient(pts)
-        own = torch.as_tensor(own, device=self.device)
         filled = self._distance(pts.detach()).to(own.dtype).reshape(own.shape)
         out = torch.minimum(own, filled)
         if was_numpy:
-            return out.cpu().numpy(), torch.as_tensor(grad).cpu().numpy()
+            return out.cpu().numpy(), grad.cpu().numpy()
         return out, grad
 
     def color(self, points: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:

@@ -20,13 +20,13 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
 import torch
 from torch import nn
 
 from hybridneus.config import FieldConfig, GridConfig
 from hybridneus.errors import ConfigError
 from hybridneus.model.eventneus import geometric_init_, make_mlp
+from hybridneus.model.protocol import as_points
 
 
 def _make_position_encoding(grid: GridConfig) -> tuple[nn.Module, bool]:
@@ -263,13 +263,6 @@ class HybridField(nn.Module):
 
     # ------------------------------------------------------------------ Field protocol
 
-    def _as_tensor(self, a: Any) -> tuple[torch.Tensor, bool]:
-        if isinstance(a, np.ndarray):
-            return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).to(self.device), True
-        if not isinstance(a, torch.Tensor):
-            return torch.as_tensor(np.asarray(a, dtype=np.float32), device=self.device), True
-        return a.to(self.device, torch.float32), False
-
     @staticmethod
     def _check_points(points: torch.Tensor, name: str = "points") -> None:
         if points.ndim != 2 or points.shape[1] != 3:
@@ -284,7 +277,7 @@ class HybridField(nn.Module):
             Not differentiable (evaluated under ``torch.no_grad``); use
             :meth:`sdf_and_features` for training.
         """
-        pts, was_numpy = self._as_tensor(points)
+        pts, was_numpy = as_points(points, self.device)
         self._check_points(pts)
         with torch.no_grad():
             parts = [torch.maximum(self.sdf_and_features(p)[0], crop_sdf(p, self.crop))
@@ -305,7 +298,7 @@ class HybridField(nn.Module):
         Note:
             Outputs are detached.
         """
-        pts, was_numpy = self._as_tensor(points)
+        pts, was_numpy = as_points(points, self.device)
         self._check_points(pts)
         sdfs, grads = [], []
         for p in pts.split(chunk):
@@ -327,8 +320,8 @@ class HybridField(nn.Module):
         Note:
             Outputs are detached (the normal input needs an inner autograd pass).
         """
-        pts, was_numpy = self._as_tensor(points)
-        d, _ = self._as_tensor(dirs)
+        pts, was_numpy = as_points(points, self.device)
+        d, _ = as_points(dirs, self.device)
         self._check_points(pts)
         self._check_points(d, "dirs")
         if d.shape != pts.shape:

@@ -6,8 +6,9 @@ and the analytic shapes in :mod:`hybridneus.model.analytic` used by tests.
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
+import numpy as np
 import torch
 
 
@@ -33,3 +34,14 @@ class Field(Protocol):
     def color(self, points: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
         """Linear-in-[0, 1] RGB (n_points, 3) seen along unit view directions (n_points, 3)."""
         ...
+
+
+def as_points(a: Any, device: torch.device) -> tuple[torch.Tensor, bool]:
+    """``a`` as a float32 tensor on ``device``, and whether it came in as numpy (or a list).
+
+    The convenience convention of the library's fields: numpy in gives numpy out, tensors
+    in give tensors on the field's device out.
+    """
+    if isinstance(a, torch.Tensor):
+        return a.to(device, torch.float32), False
+    return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).to(device), True
