@@ -3,6 +3,8 @@
 Compares, in one run and on the same inputs:
   ours     hybridneus.grids.HashGrid (per-level tables, complex pairs, custom autograd)
   ours-i64 the same with int64 row indices (int32 is the default)
+  ours-joined / ours-per-level   ours with its tables gathered as one joined table / level
+           by level (the defaults: joined on CUDA, per level on the CPU)
   flat     a straightforward version: one flat table, all levels broadcast, int64 table[idx]
   floor    only the memory traffic: index_select (+ scatter_add_) of the same number of rows
 
@@ -11,6 +13,7 @@ Examples:
   python benchmarks/bench_grids.py --log2-t 19 --log2-n 18 --repeats 5
   python benchmarks/bench_grids.py --full                # T 2^15..2^19 x N 2^14..2^18
   python benchmarks/bench_grids.py --device cuda --impl ours flat floor
+  python benchmarks/bench_grids.py --device cuda --impl ours-joined ours-per-level --log2-n 14 16 18
   THP_MEM_ALLOC_ENABLE=1 python benchmarks/bench_grids.py ...   # transparent huge pages
 """
 
@@ -145,6 +148,11 @@ def bench_case(log2_t: int, log2_n: int, impls: list[str], args: argparse.Namesp
             g64.load_state_dict(grid.state_dict())
             g64.index_dtype = torch.int64
             runners[impl] = lambda m, g=g64: run_mode(g, x, m)
+        elif impl in ("ours-joined", "ours-per-level"):
+            gj = HashGrid(log2_hashmap_size=log2_t).to(device)
+            gj.load_state_dict(grid.state_dict())
+            gj.joined_gather = impl == "ours-joined"
+            runners[impl] = lambda m, g=gj: run_mode(g, x, m)
         elif impl.startswith("ours-chunk"):
             gc = HashGrid(log2_hashmap_size=log2_t).to(device)
             gc.load_state_dict(grid.state_dict())

@@ -5,7 +5,7 @@ NeuS frequency encoding with EventNeuS annealing; all twice differentiable, CPU 
 See docs/grids.md.
 """
 
-from .frequency import FrequencyEncoding, annealing_weights
+from .frequency import FrequencyEncoding, annealing_weights, full_bands
 from .gather import gather_levels, gather_rows, interpolate_corners, scatter_rows, trilinear
 from .hash import DenseGrid, HashGrid
 from .levels import PRIMES, GridLevel, make_levels, per_level_scale
@@ -21,6 +21,7 @@ __all__ = [
     "PRIMES",
     "SphericalHarmonics",
     "annealing_weights",
+    "full_bands",
     "gather_rows",
     "interpolate_corners",
     "gather_levels",

@@ -9,26 +9,46 @@ from torch import nn
 
 from hybridneus.errors import ConfigError
 
-__all__ = ["FrequencyEncoding", "annealing_weights"]
+__all__ = ["FrequencyEncoding", "annealing_weights", "full_bands"]
 
 
 def annealing_weights(
-    step: float, n_frequencies: int, n_fmin: int, n_fmax: int, n_anneal: int | None
+    step: float | torch.Tensor,
+    n_frequencies: int,
+    n_fmin: int,
+    n_fmax: int,
+    n_anneal: int | None,
 ) -> torch.Tensor:
     """EventNeuS band weights beta_k(n) for k = 0 .. n_frequencies - 1.
 
     ``beta_k(n) = (1 - cos(pi * clamp(alpha(n) - k + n_fmin, 0, 1))) / 2`` with
     ``alpha(n) = (n_fmax - n_fmin) * n / n_anneal``. ``n_anneal=None`` or 0 gives all ones.
 
+    Args:
+        step: the step n, a number or a 0-d tensor; a tensor's device is the result's, and
+            its value is never read on the host (no GPU sync).
+
     Returns:
         beta: (n_frequencies,) float64.
     """
-    k = torch.arange(n_frequencies, dtype=torch.float64)
+    n = torch.as_tensor(step, dtype=torch.float64)
+    k = torch.arange(n_frequencies, dtype=torch.float64, device=n.device)
     if not n_anneal:
         return torch.ones_like(k)
-    alpha = (n_fmax - n_fmin) * float(step) / n_anneal
+    alpha = n * ((n_fmax - n_fmin) / n_anneal)
     t = (alpha - k + n_fmin).clamp(0.0, 1.0)
     return (1.0 - torch.cos(math.pi * t)) / 2.0
+
+
+def full_bands(
+    step: float, n_frequencies: int, n_fmin: int, n_fmax: int, n_anneal: int | None
+) -> int:
+    """How many bands :func:`annealing_weights` has at weight 1 at ``step`` (host arithmetic)."""
+    if not n_anneal:
+        return n_frequencies
+    alpha = (n_fmax - n_fmin) * float(step) / n_anneal
+    # band k is fully on once alpha - k + n_fmin >= 1
+    return max(0, min(n_frequencies, math.floor(alpha + n_fmin)))
 
 
 class FrequencyEncoding(nn.Module):
@@ -91,17 +111,29 @@ class FrequencyEncoding(nn.Module):
         self.out_dim = in_dim * (int(include_input) + 2 * n_frequencies)
         self.register_buffer("freqs", 2.0 ** torch.arange(n_frequencies, dtype=torch.float64))
         self.register_buffer("step", torch.zeros((), dtype=torch.float64))
+        self._host_step = 0.0  # the buffer's value, kept on the host
 
     def update_step(self, step: int) -> None:
         """Set the training step n used by the annealing weights."""
         self.step.fill_(float(step))
+        self._host_step = float(step)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs) -> None:
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+        self._host_step = float(self.step)  # once per load: keep per-step reads off the device
 
     def band_weights(self) -> torch.Tensor:
-        """Current beta_k(n): (n_frequencies,) float64."""
-        w = annealing_weights(
-            float(self.step), self.n_frequencies, self.n_fmin, self.n_fmax, self.n_anneal
+        """Current beta_k(n): (n_frequencies,) float64, on the encoding's device (computed
+        there from the step buffer, so a forward pass never waits for the GPU)."""
+        return annealing_weights(
+            self.step, self.n_frequencies, self.n_fmin, self.n_fmax, self.n_anneal
         )
-        return w.to(self.freqs.device)
+
+    def full_bands(self) -> int:
+        """Bands at weight 1 (:func:`full_bands` at the current step), without a device read."""
+        return full_bands(
+            self._host_step, self.n_frequencies, self.n_fmin, self.n_fmax, self.n_anneal
+        )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Encode.

@@ -180,12 +180,61 @@ class _ScatterCorners(torch.autograd.Function):
         return None, None, None, *gathered
 
 
-def gather_levels(tables: list[torch.Tensor], idx: torch.Tensor) -> tuple[torch.Tensor, ...]:
+class _GatherLevelsJoined(torch.autograd.Function):
+    """:class:`_GatherLevels` from the levels' tables joined into one: a fixed handful of
+    kernels whatever the number of levels, where the per-level path launches one gather per
+    level and 8 scatters per level in the backward."""
+
+    @staticmethod
+    def forward(ctx, idx: torch.Tensor, *tables: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        n_lev, _, n = idx.shape
+        n_features = tables[0].shape[-1]
+        sizes = [t.shape[0] for t in tables]
+        rows = (idx + _row_offsets(sizes, idx.dtype, idx.device).view(n_lev, 1, 1)).reshape(-1)
+        out = torch.cat(tables).index_select(0, rows)
+        ctx.save_for_backward(rows)
+        ctx.sizes, ctx.n_features = sizes, n_features
+        return out.view(n_lev, 8, n * n_features).unbind(1)
+
+    @staticmethod
+    def backward(ctx, *grads: torch.Tensor):
+        (rows,) = ctx.saved_tensors
+        n_features = ctx.n_features
+        # stack, scatter and split are differentiable, so this pass can be differentiated
+        src = torch.stack(grads, dim=1).reshape(-1, n_features)
+        joined = _Scatter.apply(src, rows, sum(ctx.sizes))
+        parts = joined.split(ctx.sizes)
+        return None, *(part if ctx.needs_input_grad[i + 1] else None
+                       for i, part in enumerate(parts))
+
+
+_OFFSETS: dict[tuple, torch.Tensor] = {}
+
+
+def _row_offsets(sizes: list[int], dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """First row of each table in the joined table, made once per layout and device (a
+    fresh host-to-GPU copy per call would make the gather wait for the device)."""
+    key = (tuple(sizes), dtype, device)
+    if key not in _OFFSETS:
+        starts = [sum(sizes[:i]) for i in range(len(sizes))]
+        _OFFSETS[key] = torch.tensor(starts, dtype=dtype).to(device)
+    return _OFFSETS[key]
+
+
+def gather_levels(
+    tables: list[torch.Tensor], idx: torch.Tensor, joined: bool | None = None
+) -> tuple[torch.Tensor, ...]:
     """The 8 corner values of every level, twice differentiable w.r.t. the tables.
 
     Args:
         tables: n_levels tables, each (table_size_l, F), contiguous, same dtype.
         idx: (n_levels, 8, n_points) int64 (or int32) rows of each level's table.
+        joined: gather from the tables joined into one (a copy per call; one gather, and one
+            scatter in the backward) rather than level by level (one gather per level, 8
+            scatters per level). ``None``: joined on CUDA, where every kernel launch costs
+            about as much as the work of a training batch; level by level on the CPU, where
+            small per-level tables stay in cache (docs/benchmarks/grids.md). The results
+            are the same.
 
     Returns:
         corners: 8 tensors (corner c = 4 * dz + 2 * dy + dx), each (n_levels, n_points * F),
@@ -194,6 +243,12 @@ def gather_levels(tables: list[torch.Tensor], idx: torch.Tensor) -> tuple[torch.
     Note:
         Differentiable w.r.t. the tables to any order; not w.r.t. ``idx``.
     """
+    if joined is None:
+        joined = idx.is_cuda
+    if joined:
+        if sum(t.shape[0] for t in tables) >= 2**31:
+            idx = idx.long()  # joined row numbers outgrow int32
+        return _GatherLevelsJoined.apply(idx, *tables)
     return _GatherLevels.apply(idx, *tables)
 
 

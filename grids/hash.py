@@ -46,6 +46,9 @@ class _MultiresGrid(nn.Module):
         #: Largest (levels, 8, n * F) corner buffer, in bytes, encoded with all levels
         #: batched; larger batches go level by level (CPU only; CUDA always batches).
         self.batch_bytes = 32 << 20
+        #: Gather from all levels' tables joined into one (see :func:`gather_levels`); None
+        #: joins them on CUDA only.
+        self.joined_gather: bool | None = None
         # Coarse levels are dense and fine ones hashed (side grows with the level).
         self.n_dense = sum(not lvl.hashed for lvl in levels)
         if any(lvl.hashed for lvl in levels[: self.n_dense]):
@@ -74,6 +77,7 @@ class _MultiresGrid(nn.Module):
         }
         for name, value in buffers.items():
             self.register_buffer("_" + name, value, persistent=False)
+        self._scale_cache: dict[tuple[torch.dtype, torch.device], torch.Tensor] = {}
 
     def set_active_levels(self, n: int) -> None:
         """Use only the ``n`` coarsest levels; finer levels are skipped and output zeros.
@@ -102,6 +106,19 @@ class _MultiresGrid(nn.Module):
         """
         return self._corners(xt, 0, self.active_levels)
 
+    def _scales(self, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+        """(n_levels,) level scales in ``dtype`` on ``device``, made once per pair.
+
+        Built from the levels' Python floats, not kept as a buffer, so module.float()/.half()
+        cannot round them; cached, because a fresh host-to-GPU copy on every call would make
+        each encoding wait for the device.
+        """
+        key = (dtype, device)
+        if key not in self._scale_cache:
+            values = [lvl.scale for lvl in self.levels]
+            self._scale_cache[key] = torch.tensor(values, dtype=dtype).to(device)
+        return self._scale_cache[key]
+
     def _index_dtype(self) -> torch.dtype:
         # int32 rows only while every row number fits (huge dense levels need int64).
         return self.index_dtype if max(self._sizes) < 2**31 else torch.int64
@@ -109,10 +126,7 @@ class _MultiresGrid(nn.Module):
     def _corners(self, xt: torch.Tensor, lo: int, hi: int) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`corners` of levels ``lo .. hi - 1``: idx (hi - lo, 8, n), frac (hi - lo, 3, n)."""
         n_lev, n = hi - lo, xt.shape[1]
-        # Built from Python floats each call so module.float()/.half() cannot round them.
-        scales = torch.tensor(
-            [lvl.scale for lvl in self.levels[lo:hi]], dtype=xt.dtype, device=xt.device
-        )
+        scales = self._scales(xt.dtype, xt.device)[lo:hi]
         pos = xt.unsqueeze(0) * scales.view(n_lev, 1, 1) + 0.5
         cell = pos.detach().floor()
         frac = pos - cell  # (n_lev, 3, n)
@@ -169,7 +183,7 @@ class _MultiresGrid(nn.Module):
         if n_feat > 1:
             # Repeat per feature so every lerp runs on contiguous (n_lev, n * F) memory.
             frac = frac.unsqueeze(-1).expand(n_lev, 3, n, n_feat).reshape(n_lev, 3, n * n_feat)
-        corners = gather_levels([self.tables[i] for i in range(lo, hi)], idx)
+        corners = gather_levels([self.tables[i] for i in range(lo, hi)], idx, self.joined_gather)
         feats = trilinear(corners, frac).view(n_lev, n, n_feat).transpose(0, 1)
         return feats.reshape(n, n_lev * n_feat)
 

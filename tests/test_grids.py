@@ -313,8 +313,9 @@ def test_int32_indices_and_chunking_match():
 
 @pytest.mark.parametrize("active", [3, 6])
 def test_batched_and_per_level_encoding_agree_to_second_order(active):
-    """Small batches encode all levels at once, large ones level by level: same results,
-    same table gradients and the same double backward (Eikonal)."""
+    """Small batches encode all levels at once, large ones level by level, and the joined
+    table (CUDA's default) gathers all levels at once: same results, same table gradients
+    and the same double backward (Eikonal)."""
     grid = HashGrid(6, 2, 12, 4, 256, dtype=torch.float64)
     with torch.no_grad():
         for t in grid.tables:
@@ -322,8 +323,8 @@ def test_batched_and_per_level_encoding_agree_to_second_order(active):
     grid.set_active_levels(active)
     x = torch.rand(300, 3, dtype=torch.float64)
     results = []
-    for batch_bytes in (1 << 40, 0):
-        grid.batch_bytes = batch_bytes
+    for batch_bytes, joined in ((1 << 40, False), (0, False), (1 << 40, True), (0, True)):
+        grid.batch_bytes, grid.joined_gather = batch_bytes, joined
         grid.zero_grad(set_to_none=True)
         xx = x.clone().requires_grad_(True)
         out = grid(xx)
@@ -331,12 +332,55 @@ def test_batched_and_per_level_encoding_agree_to_second_order(active):
         (out.square().sum() + gx.square().sum()).backward()
         grads = [t.grad for t in grid.tables[:active]]
         results.append((out.detach(), gx.detach(), grads, xx.grad))
-    (o1, g1, t1, x1), (o2, g2, t2, x2) = results
-    torch.testing.assert_close(o1, o2)
-    torch.testing.assert_close(g1, g2)
-    torch.testing.assert_close(x1, x2)
-    for a, b in zip(t1, t2, strict=True):
-        torch.testing.assert_close(a, b)
+    o1, g1, t1, x1 = results[0]
+    for o2, g2, t2, x2 in results[1:]:
+        torch.testing.assert_close(o1, o2)
+        torch.testing.assert_close(g1, g2)
+        torch.testing.assert_close(x1, x2)
+        for a, b in zip(t1, t2, strict=True):
+            torch.testing.assert_close(a, b)
+
+
+def test_joined_gather_matches_per_level_to_second_order():
+    """gather_levels on one joined table equals the level-by-level gather, for 1, 2 and 4
+    features per level, through gradcheck and gradgradcheck."""
+    gen = torch.Generator().manual_seed(0)
+    sizes = (50, 70, 30)
+    idx = torch.stack([torch.randint(0, n, (8, 13), generator=gen) for n in sizes]).int()
+    for n_features in (1, 2, 4):
+        tables = [torch.randn(n, n_features, dtype=torch.float64, generator=gen,
+                              requires_grad=True) for n in sizes]
+        per_level = grids.gather_levels(tables, idx, joined=False)
+        joined = grids.gather_levels(tables, idx, joined=True)
+        for a, b in zip(per_level, joined, strict=True):
+            assert torch.equal(a, b)
+        assert gradcheck(lambda *t: grids.gather_levels(list(t), idx, joined=True), tables)
+        assert gradgradcheck(lambda *t: grids.gather_levels(list(t), idx, joined=True), tables)
+
+
+def test_the_encoding_makes_no_tensor_from_host_data_once_warm():
+    """After the first call an encoding builds nothing from Python numbers (on a GPU each
+    such tensor is a host-to-device copy that waits for the device)."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    grid = HashGrid(6, 2, 12, 4, 256)
+    x = torch.rand(100, 3, requires_grad=True)
+    made: list[str] = []
+
+    class Watch(TorchDispatchMode):
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            if "lift_fresh" in str(func):
+                made.append(str(func))
+            return func(*args, **(kwargs or {}))
+
+    for joined in (False, True):
+        grid.joined_gather = joined
+        grid(x).sum().backward()  # warm: per-device constants are made here
+        with Watch():
+            out = grid(x)
+            (gx,) = torch.autograd.grad(out.sum(), x, create_graph=True)
+            (out.sum() + gx.square().sum()).backward()
+    assert made == []
 
 
 def test_bad_config_and_shape_raise():
@@ -368,7 +412,10 @@ def test_cuda_matches_cpu():
         return sdf.detach().cpu(), [t.grad.cpu() for t in g.tables]
 
     a, ga = run(grid, x)
-    b, gb = run(gcuda, x.cuda())
-    torch.testing.assert_close(a, b)
-    for u, v in zip(ga, gb, strict=True):
-        torch.testing.assert_close(u, v)
+    for joined in (None, False):  # CUDA's default (the joined table), then level by level
+        gcuda.joined_gather = joined
+        gcuda.zero_grad(set_to_none=True)
+        b, gb = run(gcuda, x.cuda())
+        torch.testing.assert_close(a, b)
+        for u, v in zip(ga, gb, strict=True):
+            torch.testing.assert_close(u, v)

@@ -93,6 +93,7 @@ def test_frequency_annealing_formula():
             (1 - math.cos(math.pi * min(max(alpha - k + n_fmin, 0.0), 1.0))) / 2 for k in range(n)
         ]
         torch.testing.assert_close(enc.band_weights(), torch.tensor(beta, dtype=torch.float64))
+        assert enc.full_bands() == sum(b >= 1.0 for b in beta)
         out = enc(x)
         for k in range(n):
             blk = out[:, 3 + 6 * k : 3 + 6 * k + 6]
@@ -108,6 +109,7 @@ def test_frequency_step_survives_state_dict_and_errors():
     b = FrequencyEncoding(4)
     b.load_state_dict(a.state_dict())
     torch.testing.assert_close(a.band_weights(), b.band_weights())
+    assert b.full_bands() == a.full_bands() == 1  # the host copy of the step is restored too
     with pytest.raises(ConfigError, match="n_fmin"):
         FrequencyEncoding(4, n_fmin=5)
     with pytest.raises(ValueError, match="in_dim|shape"):

@@ -205,7 +205,7 @@ class HybridField(nn.Module):
     def active_levels(self) -> int:
         """Active grid levels (or fully-on frequency bands)."""
         if self.grid_config.kind == "frequency":
-            return int((self.encoding.band_weights() >= 1.0).sum())
+            return self.encoding.full_bands()
         return int(self.encoding.active_levels)
 
     # ------------------------------------------------------------------ core (torch)

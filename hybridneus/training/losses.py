@@ -131,11 +131,11 @@ def outside_loss(sdf: torch.Tensor, outside: torch.Tensor) -> torch.Tensor:
         loss: scalar.
 
     Note:
-        Differentiable in ``sdf``.
+        Differentiable in ``sdf``. Masked by multiplication, not indexing: no host sync on a
+        GPU (boolean indexing and ``any()`` wait for the device).
     """
-    if not bool(outside.any()):
-        return sdf.sum() * 0.0
-    return torch.relu(-sdf[outside]).mean()
+    weight = outside.to(sdf.dtype)
+    return (torch.relu(-sdf) * weight).sum() / weight.sum().clamp(min=1.0)
 
 
 def sparsity_loss(sdf: torch.Tensor, tau: float) -> torch.Tensor:

@@ -433,17 +433,21 @@ class Trainer:
         self.optimizer.step()
         self._apply_inv_s_floor()
         self.step += 1
+        scalars = {f"loss/{k}": v for k, v in terms.items()}
+        scalars.update(
+            {"loss/total": total, "inv_s": self.field.inv_s(), "opacity": out.opacity.mean()}
+        )
+        # One device-to-host copy for all of them: on a GPU each float() would wait for the
+        # device. The copy also ends the step's GPU work, so step_seconds counts it.
+        values = torch.stack([v.detach().float().reshape(()) for v in scalars.values()])
+        logs = dict(zip(scalars, values.tolist(), strict=True))
         seconds = time.perf_counter() - t_start
         self.elapsed += seconds
-        logs = {f"loss/{k}": float(v.detach()) for k, v in terms.items()}
         logs.update(
             {
-                "loss/total": float(total.detach()),
-                "inv_s": float(self.field.inv_s().detach()),
                 "lr": cfg.train.lr * factor,
                 "levels": float(self.field.active_levels()),
                 "occupied": self.occupied_fraction,
-                "opacity": float(out.opacity.detach().mean()),
                 "step_seconds": seconds,
             }
         )
