@@ -82,3 +82,40 @@ def test_results_keep_devices_and_variants_apart(tmp_path):
     assert got == {("fast", "cpu"): 0.01, ("fast", "cuda"): 0.015,
                    ("fast train.n_rays=1024", "cuda"): 0.02}
     assert suite.preset_spec("fast-rgb") == ("fast", ["train.supervision=rgb"])
+
+
+def test_gpu_pack_carries_what_a_fit_reads_and_unpacks_returned_runs(tiny_scene, tmp_path):
+    """benchmarks/gpu_pack.py: the packed copy loads as the same dataset (events identical,
+    compressed, no frames); the flat files a GPU session returns become a run folder again."""
+    import tarfile
+
+    import numpy as np
+
+    from hybridneus.data import load_dataset
+
+    spec = importlib.util.spec_from_file_location("gpu_pack", SUITE.parent / "gpu_pack.py")
+    gpu_pack = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gpu_pack)
+
+    assert gpu_pack.pack(tiny_scene / "device", tmp_path / "carry") > 0
+    packed = tmp_path / "carry" / "device"
+    assert not (packed / "train" / "rgb").exists() and not (packed / "test").exists()
+    a, b = load_dataset(tiny_scene / "device")["train"], load_dataset(packed)["train"]
+    assert a.n_views == b.n_views
+    for name in ("x", "y", "t", "p"):
+        assert np.array_equal(getattr(a.events, name), getattr(b.events, name))
+    np.testing.assert_array_equal(a.c2w, b.c2w)
+
+    flat = tmp_path / "returned"
+    flat.mkdir()
+    small = tmp_path / "small"
+    small.mkdir()
+    for name in ("fit.json", "config.yaml", "metrics.csv"):
+        (small / name).write_text(name)
+    with tarfile.open(flat / "scene-1.tar", "w") as tar:
+        for name in ("fit.json", "config.yaml", "metrics.csv"):
+            tar.add(small / name, arcname=name)
+    (flat / "scene-1.t00060.0-s9.pt").write_bytes(b"snapshot")
+    (run,) = gpu_pack.unpack(flat, tmp_path / "runs")
+    assert (run / "fit.json").read_text() == "fit.json"
+    assert (run / "snapshots" / "t00060.0-s9.pt").read_bytes() == b"snapshot"

@@ -1,0 +1,86 @@
+"""Pack simulated datasets small enough to travel to a lent GPU machine (64 MiB in all).
+
+A fit needs a dataset's ``scene.json`` and its training split's poses, intrinsics and events;
+not the RGB frames, the test split or the ground-truth mesh (scoring happens back here, with
+``run_suite.py --score-runs``, which finds the full dataset in the cache by name). Events are
+re-saved with ``np.savez_compressed`` (the same arrays; about a third of the size), so two
+full-size datasets fit one transfer.
+
+    python benchmarks/gpu_pack.py --out gpu_carry /tmp/hybridneus-bench/bunny-999v-346x260-t8 \
+        /tmp/hybridneus-bench/xylophone-999v-346x260-t8
+
+Then, on the GPU machine, ``bash benchmarks/gpu_session.sh gpu_carry`` (``gpu_carry`` named in
+the run's ``carry`` and listed in ``.git/info/exclude``). What comes back (per run a tar of its
+small files and its snapshots, flat) is made run folders again with
+
+    python benchmarks/gpu_pack.py --unpack FILES_AT --out RUNS
+    python benchmarks/run_suite.py --score-runs RUNS/* --image-views 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+
+def pack(dataset: Path, out: Path) -> int:
+    """Copy what a fit reads from ``dataset`` into ``out / dataset.name``; return its bytes."""
+    if not (dataset / "scene.json").is_file():
+        raise SystemExit(f"{dataset}: no scene.json (not a simulated dataset folder)")
+    dst = out / dataset.name
+    if dst.exists():
+        shutil.rmtree(dst)
+    (dst / "train" / "events").mkdir(parents=True)
+    shutil.copy2(dataset / "scene.json", dst / "scene.json")
+    for sub in ("pose", "intrinsics"):
+        shutil.copytree(dataset / "train" / sub, dst / "train" / sub)
+    for src in sorted((dataset / "train" / "events").iterdir()):
+        if src.suffix == ".npz":
+            with np.load(src) as z:
+                np.savez_compressed(dst / "train" / "events" / src.name, **{k: z[k] for k in z})
+        else:
+            shutil.copy2(src, dst / "train" / "events" / src.name)
+    return sum(p.stat().st_size for p in dst.rglob("*") if p.is_file())
+
+
+def unpack(files: Path, out: Path) -> list[Path]:
+    """Run folders from ``gpu_session.sh``'s flat output: ``NAME.tar`` holds the small files,
+    ``NAME.<snapshot>.pt`` the snapshots. Returns the run folders made under ``out``."""
+    import tarfile
+
+    runs = []
+    for archive in sorted(files.glob("*.tar")):
+        run = out / archive.stem
+        (run / "snapshots").mkdir(parents=True, exist_ok=True)
+        with tarfile.open(archive) as tar:
+            tar.extractall(run, filter="data")
+        for snap in files.glob(f"{archive.stem}.*.pt"):
+            shutil.copy2(snap, run / "snapshots" / snap.name[len(archive.stem) + 1:])
+        runs.append(run)
+    return runs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("datasets", nargs="*", type=Path)
+    ap.add_argument("--out", type=Path, default=Path("gpu_carry"))
+    ap.add_argument("--unpack", type=Path, metavar="FILES",
+                    help="make run folders under --out from gpu_session.sh's returned files")
+    args = ap.parse_args()
+    if args.unpack:
+        for run in unpack(args.unpack, args.out):
+            print(run)
+        return
+    total = 0
+    for dataset in args.datasets:
+        size = pack(dataset, args.out)
+        total += size
+        print(f"{args.out / dataset.name}: {size / 2**20:.1f} MiB")
+    print(f"total {total / 2**20:.1f} MiB (the transfer limit is 64 MiB with the working tree)")
+
+
+if __name__ == "__main__":
+    main()
