@@ -11,7 +11,10 @@ taken on a CPU; only the times need the GPU.
 Prints, per gather mode: dispatched operations per step, the non-view ones (kernels, or
 CPU loops), read-backs per step, and the median step time over ``--steps`` after
 ``--warmup``. Steps refresh the occupancy grid every ``render.occupancy_every`` steps; the
-counted steps skip that refresh, the timed ones include it as training does.
+counted steps skip that refresh, the timed ones include it as training does. On a CPU,
+encodings whose corner buffers exceed ``HashGrid.batch_bytes`` go level by level (CUDA always
+batches the levels), so CPU counts stand for CUDA's only at batches under that size: the
+default 256 pixels, not 1,024.
 """
 
 from __future__ import annotations

@@ -82,7 +82,7 @@ def mesh(
     from hybridneus.meshing import MESH_FORMATS, CropVolume, PostprocessOptions, save_mesh
     from hybridneus.meshing.extract import ExtractionStats, extract_mesh
     from hybridneus.meshing.render import save_preview
-    from hybridneus.training.runs import latest_run, load_cameras, load_field
+    from hybridneus.training.runs import latest_run, load_cameras, load_checkpoint, load_field
 
     fmt = format.lower()
     if fmt not in MESH_FORMATS:
@@ -94,9 +94,11 @@ def mesh(
     run_dir = Path(run) if run is not None else latest_run(runs_root)
     if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
         run_dir = latest_run(run_dir)  # a runs root was given: use its latest run
-    field = load_field(run_dir, device=device)
-    cameras = load_cameras(run_dir) if fill_unseen and not no_postprocess else None
-    if fill_unseen and not no_postprocess and cameras is None:
+    state = load_checkpoint(run_dir)  # read once: the field and the cameras are both in it
+    field = load_field(run_dir, device=device, checkpoint=state)
+    fill = fill_unseen and not no_postprocess
+    cameras = load_cameras(run_dir, checkpoint=state) if fill else None
+    if fill and cameras is None:
         typer.echo(f"{run_dir}: no camera poses saved or found; unseen space left as it is")
 
     crop = None

@@ -82,18 +82,26 @@ def test_mesh_fills_unseen_space_from_the_runs_cameras_unless_told_not_to(
     import hybridneus.meshing.extract as extract
     from hybridneus.training.runs import latest_run, load_cameras
 
-    seen = []
-    real = extract.extract_mesh
+    import torch
+
+    seen, reads = [], []
+    real, real_load = extract.extract_mesh, torch.load
 
     def spy(*args, **kwargs):
         seen.append(kwargs["cameras"])
         return real(*args, **kwargs)
 
+    def counted_load(*args, **kwargs):
+        reads.append(args[0])
+        return real_load(*args, **kwargs)
+
     monkeypatch.setattr(extract, "extract_mesh", spy)
+    monkeypatch.setattr(torch, "load", counted_load)
     for flags in ([], ["--keep-unseen"], ["--no-postprocess"]):
         code, err = cli(str(runs), "--res", "32", "--out", str(tmp_path / f"{len(seen)}.ply"),
                         "--no-preview", "--device", "cpu", *flags)
         assert code == 0, err
+    assert len(reads) == 3  # the checkpoint once per command: field and cameras share it
     expected = load_cameras(latest_run(runs))
     assert seen[0] is not None and np.allclose(seen[0], expected)
     assert seen[1] is None and seen[2] is None

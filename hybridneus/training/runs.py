@@ -128,12 +128,16 @@ def _resolve_run(run_dir: str | os.PathLike) -> Path:
     return run_dir
 
 
-def load_field(run_dir: str | os.PathLike, device: str = "auto"):
+def load_field(
+    run_dir: str | os.PathLike, device: str = "auto", checkpoint: dict[str, Any] | None = None
+):
     """Load the trained field of a run folder, in eval mode, on ``device``.
 
     Args:
         run_dir: a run folder (or a runs root holding a ``latest`` pointer).
         device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
+        checkpoint: the run's checkpoint already read by :func:`load_checkpoint` (it is
+            tens of MB: read it once when the cameras are wanted too); ``None`` reads it.
 
     Returns:
         The :class:`~hybridneus.model.field.HybridField` (implements ``Field``).
@@ -145,7 +149,7 @@ def load_field(run_dir: str | os.PathLike, device: str = "auto"):
 
     run_dir = _resolve_run(run_dir)
     dev = resolve_device(device)
-    state = load_checkpoint(run_dir)
+    state = load_checkpoint(run_dir) if checkpoint is None else checkpoint
     try:
         cfg = load_run_config(run_dir)
     except ConfigError as exc:
@@ -160,11 +164,14 @@ def load_field(run_dir: str | os.PathLike, device: str = "auto"):
     return field.to(dev).eval()
 
 
-def load_cameras(run_dir: str | os.PathLike) -> np.ndarray | None:
+def load_cameras(
+    run_dir: str | os.PathLike, checkpoint: dict[str, Any] | None = None
+) -> np.ndarray | None:
     """Centres (n_views, 3) of the cameras a run was trained from, or ``None``.
 
     Runs save them in their checkpoint; for older runs they are read from the poses of the
-    dataset that ``config.yaml`` names, when that folder is still there.
+    dataset that ``config.yaml`` names, when that folder is still there. ``checkpoint``: the
+    run's checkpoint already read by :func:`load_checkpoint` (``None`` reads it).
 
     Raises:
         RunError: missing or unreadable run folder / checkpoint, or non-finite saved centres.
@@ -173,7 +180,8 @@ def load_cameras(run_dir: str | os.PathLike) -> np.ndarray | None:
     from hybridneus.errors import DatasetError
 
     run_dir = _resolve_run(run_dir)
-    saved = load_checkpoint(run_dir).get("scene", {}).get("cameras")
+    state = load_checkpoint(run_dir) if checkpoint is None else checkpoint
+    saved = state.get("scene", {}).get("cameras")
     if saved:
         centres = np.asarray(saved, dtype=np.float64).reshape(-1, 3)
         if not np.isfinite(centres).all():
