@@ -79,10 +79,10 @@ def test_postprocess_flags_reach_the_postprocessing(runs, tmp_path, cli, monkeyp
 def test_mesh_fills_unseen_space_from_the_runs_cameras_unless_told_not_to(
     runs, tmp_path, cli, monkeypatch
 ):
+    import torch
+
     import hybridneus.meshing.extract as extract
     from hybridneus.training.runs import latest_run, load_cameras
-
-    import torch
 
     seen, reads = [], []
     real, real_load = extract.extract_mesh, torch.load
