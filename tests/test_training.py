@@ -547,3 +547,23 @@ def test_a_training_step_waits_for_the_device_only_for_its_logs(scene, preset):
     assert all(isinstance(v, float) for v in logs[-1].values())
     # the watch itself sees reads
     assert _host_reads(lambda: float(torch.ones(2).sum())) == ["aten._local_scalar_dense"]
+
+
+def test_a_training_step_computes_gradients_for_the_parameters_only(scene):
+    """The sample points are autograd leaves (the Eikonal term differentiates the SDF in
+    them); the step's backward must not also compute their gradient, which would cost a pass
+    through the grid's interpolation weights for nothing."""
+    trainer, _ = prepare(scene, tiny("train.iters=10"), device="cpu")
+    leaves = []
+    real = trainer.field.sdf_and_features
+
+    def keep(x):
+        if x.requires_grad and x.is_leaf:
+            leaves.append(x)
+        return real(x)
+
+    trainer.field.sdf_and_features = keep
+    trainer.train_step()
+    assert leaves and all(x.grad is None for x in leaves)
+    assert trainer.field.variance.grad is not None
+    assert all(t.grad is not None for t in trainer.field.encoding.tables[:2])

@@ -209,6 +209,7 @@ class Trainer:
             cfg,
         )
         self.base_lrs = [cfg.train.lr, cfg.train.lr_variance]
+        self._trained = [q for q in [*others, *variance] if q.requires_grad]
         self.step = 0
         self.total_steps = max(1, cfg.train.iters)
         self.elapsed = 0.0
@@ -429,7 +430,10 @@ class Trainer:
             terms["eikonal"] = L.eikonal_loss(torch.cat(grads))
         total = sum(getattr(lw, f"lambda_{name}") * value for name, value in terms.items())
         self.optimizer.zero_grad(set_to_none=True)
-        total.backward()
+        # Only the trained parameters: the sample points are leaves that require grad (for
+        # the Eikonal term's d sdf / dx), and a plain backward() would also compute their
+        # gradient, through the grid's interpolation weights, for nothing.
+        total.backward(inputs=self._trained)
         self.optimizer.step()
         self._apply_inv_s_floor()
         self.step += 1
