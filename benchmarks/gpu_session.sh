@@ -13,7 +13,8 @@
 #         python benchmarks/gpu_pack.py --unpack FILES_AT --out RUNS, then
 #         python benchmarks/run_suite.py --score-runs RUNS/* --image-views 0
 # The GPU machine has no network and no Open3D / pymeshlab / trimesh: the package installs
-# without dependencies, and nothing here meshes. DEVICE=cpu MINUTES=0.1 makes a dry run.
+# without dependencies (or, where that fails, runs from a tree of links laid out as pyproject.toml
+# maps the package), and nothing here meshes. DEVICE=cpu MINUTES=0.1 makes a dry run.
 set -u
 CARRY=${1:-gpu_carry}
 MINUTES=${MINUTES:-2}
@@ -28,7 +29,19 @@ exec >"$LOG" 2>&1
 date -u
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
 $PY -m pip install -q --no-deps --no-build-isolation -e . 2>&1 | tail -2
-$PY -c "import torch, hybridneus; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"
+if ! $PY -c "import hybridneus.grids, hybridneus.cli" 2>/dev/null; then
+  # No install (an old setuptools, say): the same package layout from links, as
+  # pyproject.toml maps it (grids/ and cli/ are hybridneus.grids and hybridneus.cli).
+  site=/tmp/hybridneus-site
+  rm -rf "$site" && mkdir -p "$site/hybridneus"
+  for f in "$PWD"/hybridneus/*; do ln -s "$f" "$site/hybridneus/"; done
+  ln -s "$PWD/grids" "$site/hybridneus/grids"
+  ln -s "$PWD/cli" "$site/hybridneus/cli"
+  export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
+  PY="$PY -P"  # or the repository root, first on the path, would shadow the link tree
+  echo "hybridneus from links in $site (pip install -e . failed)"
+fi
+$PY -c "import torch, hybridneus.grids; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"
 
 echo "== 1. fits of $MINUTES minutes"
 scenes=$(for d in "$CARRY"/*/; do basename "$d" | cut -d- -f1; done)
