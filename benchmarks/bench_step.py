@@ -78,9 +78,12 @@ def main() -> None:
         field.encoding(x).sum().backward()
         sync()
 
+    # backward into the parameters only, as the trainer does (the points' gradient is unused)
+    params = [p for p in field.parameters() if p.requires_grad]
+
     def sdf_eikonal():
         s, g, f = field.sdf_gradient_features(pts, create_graph=True)
-        (s.sum() + ((g.norm(dim=-1) - 1) ** 2).sum() + f.sum()).backward()
+        (s.sum() + ((g.norm(dim=-1) - 1) ** 2).sum() + f.sum()).backward(inputs=params)
         sync()
 
     def heads_only():
@@ -91,7 +94,8 @@ def main() -> None:
 
     def render_fwd_bwd():
         out = render_rays(field, o, d, trainer.sampler, trainer.generator, True)
-        (out.color.sum() + (out.gradients.norm(dim=-1) - 1).pow(2).mean()).backward()
+        loss = out.color.sum() + (out.gradients.norm(dim=-1) - 1).pow(2).mean()
+        loss.backward(inputs=params)
         sync()
 
     def optimiser():
