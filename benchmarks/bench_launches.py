@@ -25,28 +25,6 @@ import time
 from pathlib import Path
 
 import torch
-from torch.utils._python_dispatch import TorchDispatchMode
-
-READS = ("aten::_local_scalar_dense", "aten::nonzero", "aten::is_nonzero",
-         "aten::masked_select", "aten::equal")
-
-
-class Count(TorchDispatchMode):
-    """Dispatched operations, those that are not views, and device read-backs."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.ops = self.kernels = self.reads = 0
-
-    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
-        self.ops += 1
-        self.kernels += not func.is_view
-        name = func.name()
-        bool_mask = name.startswith("aten::index") and any(
-            isinstance(a, (list, tuple)) and any(
-                isinstance(t, torch.Tensor) and t.dtype == torch.bool for t in a) for a in args)
-        self.reads += name in READS or bool_mask
-        return func(*args, **(kwargs or {}))
 
 
 def main() -> None:
@@ -64,6 +42,7 @@ def main() -> None:
 
     from hybridneus.api import prepare
     from hybridneus.config import apply_overrides, preset_config
+    from hybridneus.dispatch_count import DispatchCount
 
     cfg = apply_overrides(preset_config(args.preset),
                           [f"train.n_rays={args.rays}", "train.iters=1000000"])
@@ -89,7 +68,7 @@ def main() -> None:
             trainer.train_step()
         if trainer.step % every == 0:
             trainer.train_step()
-        counter = Count()
+        counter = DispatchCount()
         with counter:
             trainer.train_step()
         times = []
@@ -102,7 +81,7 @@ def main() -> None:
         name = {None: "default", False: "per level", True: "joined"}[mode]
         if mode is None:
             name += f" ({'joined' if trainer.device.type == 'cuda' else 'per level'})"
-        print(f"| {name} | {counter.ops} | {counter.kernels} | {counter.reads} | "
+        print(f"| {name} | {counter.ops} | {counter.kernels} | {len(counter.reads)} | "
               f"{statistics.median(times):.4f} |", flush=True)
 
 
