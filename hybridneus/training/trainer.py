@@ -209,7 +209,6 @@ class Trainer:
             cfg,
         )
         self.base_lrs = [cfg.train.lr, cfg.train.lr_variance]
-        self._trained = [q for q in [*others, *variance] if q.requires_grad]
         self.step = 0
         self.total_steps = max(1, cfg.train.iters)
         self.elapsed = 0.0
@@ -433,7 +432,8 @@ class Trainer:
         # Only the trained parameters: the sample points are leaves that require grad (for
         # the Eikonal term's d sdf / dx), and a plain backward() would also compute their
         # gradient, through the grid's interpolation weights, for nothing.
-        total.backward(inputs=self._trained)
+        total.backward(inputs=[q for group in self.optimizer.param_groups
+                               for q in group["params"] if q.requires_grad])
         self.optimizer.step()
         self._apply_inv_s_floor()
         self.step += 1
