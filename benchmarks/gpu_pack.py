@@ -31,18 +31,22 @@ def pack(dataset: Path, out: Path) -> int:
     if not (dataset / "scene.json").is_file():
         raise SystemExit(f"{dataset}: no scene.json (not a simulated dataset folder)")
     dst = out / dataset.name
-    if dst.exists():
-        shutil.rmtree(dst)
-    (dst / "train" / "events").mkdir(parents=True)
-    shutil.copy2(dataset / "scene.json", dst / "scene.json")
+    tmp = out / f".{dataset.name}.tmp"  # renamed into place when complete
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    (tmp / "train" / "events").mkdir(parents=True)
+    shutil.copy2(dataset / "scene.json", tmp / "scene.json")
     for sub in ("pose", "intrinsics"):
-        shutil.copytree(dataset / "train" / sub, dst / "train" / sub)
+        shutil.copytree(dataset / "train" / sub, tmp / "train" / sub)
     for src in sorted((dataset / "train" / "events").iterdir()):
         if src.suffix == ".npz":
             with np.load(src) as z:
-                np.savez_compressed(dst / "train" / "events" / src.name, **{k: z[k] for k in z})
+                np.savez_compressed(tmp / "train" / "events" / src.name, **{k: z[k] for k in z})
         else:
-            shutil.copy2(src, dst / "train" / "events" / src.name)
+            shutil.copy2(src, tmp / "train" / "events" / src.name)
+    if dst.exists():
+        shutil.rmtree(dst)
+    tmp.rename(dst)
     return sum(p.stat().st_size for p in dst.rglob("*") if p.is_file())
 
 
