@@ -66,8 +66,7 @@ def fit(
 ) -> None:
     """Train on DATA's event stream and write a run folder (config, checkpoints, previews).
 
-    Ctrl-C saves a checkpoint; continue with --resume RUN. `hybridneus mesh` then extracts
-    the mesh of runs/latest.
+    Ctrl-C saves a checkpoint (--resume RUN continues); `hybridneus mesh` meshes runs/latest.
     """
     import os
 

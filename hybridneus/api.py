@@ -8,6 +8,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -61,6 +62,41 @@ def load_training_data(cfg: Config, dataset: Any = None):
     crop_keys = ("crop_r", "crop_y_min", "crop_y_max")
     if cfg.data.crop_from_events and all(getattr(cfg.data, k) is None for k in crop_keys):
         dataset = _crop_from_events(cfg, dataset, crop_keys)
+    if cfg.data.eps_from_events and cfg.data.tonemap_eps is None:
+        dataset = _eps_from_events(cfg, dataset)
+    return dataset
+
+
+def _eps_from_events(cfg: Config, dataset: Any) -> Any:
+    """``dataset`` (a copy) with its preset's tonemap eps lowered to ``data.eps_max`` and,
+    where the events ask for larger log-brightness changes than that eps can render, to the
+    eps that can (:mod:`hybridneus.data.contrast`). The eps taken is written into
+    ``cfg.data`` so that a resume reuses it."""
+    import copy
+    import logging
+
+    from hybridneus.data import apply_overrides as preset_overrides
+    from hybridneus.data.contrast import event_extent, reachable_eps
+
+    p = dataset.preset
+    change = event_extent(dataset[cfg.data.split], p)
+    need = reachable_eps(change) if change else math.inf
+    cap = min(need, cfg.data.eps_max) if cfg.data.eps_max > 0 else need
+    if cap >= p.tonemap_eps:
+        cfg.data.tonemap_eps = float(p.tonemap_eps)
+        return dataset
+    eps = float(f"{cap:.2g}")
+    cfg.data.tonemap_eps = eps
+    dataset = copy.copy(dataset)
+    dataset.preset = preset_overrides(p, {"tonemap_eps": eps})
+    if cap < cfg.data.eps_max or cfg.data.eps_max <= 0:
+        why = f"the events ask for log-brightness changes up to {change:.2f} in one window"
+    else:
+        why = f"data.eps_max {cfg.data.eps_max:g}"
+    msg = (f"tonemap eps {eps:g} (preset {p.tonemap_eps:g}): {why} (data.eps_from_events=false "
+           "keeps the preset's)")
+    logging.getLogger("hybridneus").info(msg)
+    dataset.notes = [*dataset.notes, msg]
     return dataset
 
 

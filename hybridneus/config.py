@@ -149,10 +149,12 @@ class DataConfig:
     crop_y_max: float | None = None  # crop-cylinder top
     background: list[float] | None = None  # RGB in [0, 1] behind the object
     crop_from_events: bool = True  # shrink the crop to the events' visual hull (if no crop set)
+    eps_from_events: bool = True  # cap tonemap_eps (eps_max, and what the events' changes need)
+    eps_max: float = 1e-3  # eps_from_events: the largest tonemap eps the loss uses
 
     def overrides(self) -> dict[str, Any]:
         """The preset overrides that are set, as ``{name: value}`` for the data module."""
-        skip = {"path", "split", "crop_from_events"}
+        skip = {"path", "split", "crop_from_events", "eps_from_events", "eps_max"}
         out = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)

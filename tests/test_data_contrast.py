@@ -1,0 +1,96 @@
+"""The tonemap eps of the loss: at most data.eps_max, and lower where the events need it."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hybridneus.data import load_dataset
+from hybridneus.data.contrast import event_extent, reachable_eps
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_data_builder import write_split  # noqa: E402
+
+N_VIEWS = 60
+
+
+def _dark_patch_events(count: int) -> dict:
+    """``count`` negative events on each pixel of a 4x4 patch between views 10 and 20 (a
+    dark object edge passing), nothing elsewhere."""
+    xs, ys = np.meshgrid(np.arange(4, 8), np.arange(5, 9))
+    xs, ys = np.repeat(xs.ravel(), count), np.repeat(ys.ravel(), count)
+    t = np.sort(np.random.default_rng(0).uniform(10, 20, size=xs.size))
+    t[-1] = N_VIEWS - 1  # the stream ends at the last view
+    return {"x": xs.astype(np.int16), "y": ys.astype(np.int16), "t": t,
+            "p": -np.ones(xs.size, dtype=np.int8)}
+
+
+@pytest.fixture
+def scene(tmp_path):
+    """A dataset with no scene.json under an unknown path: the nerf group's eps = 0.1."""
+    def make(count: int):
+        root = tmp_path / f"patch{count}"
+        write_split(root / "train", n_views=N_VIEWS, events=_dark_patch_events(count))
+        return root
+    return make
+
+
+def test_extent_is_threshold_times_the_window_count(scene):
+    ds = load_dataset(scene(30))
+    p = ds.preset
+    assert (p.threshold, p.tonemap_eps) == (0.25, 0.1)
+    assert event_extent(ds.splits["train"], p) == pytest.approx(0.25 * 30)
+    from hybridneus.data import apply_overrides
+
+    shifted = apply_overrides(p, {"polarity_offset": -0.4})  # each event counts -1.4
+    assert event_extent(ds.splits["train"], shifted) == pytest.approx(0.25 * 30 * 1.4)
+
+
+def test_reachable_eps_gives_the_range_asked_for():
+    for change in (0.5, 2.0, 7.5):
+        eps = reachable_eps(change, margin=1.2)
+        assert math.log((1 + eps) / eps) == pytest.approx(1.2 * change)
+    assert reachable_eps(1.0, margin=1.0) > reachable_eps(1.0, margin=2.0)
+
+
+def test_fit_lowers_eps_to_the_cap_and_further_where_the_events_need_it(scene):
+    from hybridneus.api import load_training_data
+    from hybridneus.config import apply_overrides, preset_config
+
+    dark = scene(30)  # 7.5 log units: beyond what eps = 0.1 (+-2.4) or 0.001 (+-6.9) renders
+    cfg = preset_config("fast")
+    data = load_training_data(cfg, dark)
+    eps = data.preset.tonemap_eps
+    assert eps == cfg.data.tonemap_eps  # recorded, so that a resume keeps it
+    assert math.log1p(1 / eps) >= 7.5 and 1e-5 < eps < 1e-3
+    assert any("up to 7.50 in one window" in note for note in data.notes)
+
+    faint = scene(4)  # 1.0 log units: within range, only the cap applies
+    cfg = preset_config("fast")
+    data = load_training_data(cfg, faint)
+    assert data.preset.tonemap_eps == cfg.data.tonemap_eps == 1e-3
+    assert any("data.eps_max 0.001" in note for note in data.notes)
+    cfg = apply_overrides(preset_config("fast"), ["data.eps_max=0"])  # no cap: preset kept
+    assert load_training_data(cfg, faint).preset.tonemap_eps == 0.1
+    cfg = apply_overrides(preset_config("fast"), ["data.eps_max=0"])
+    assert 1e-5 < load_training_data(cfg, dark).preset.tonemap_eps < 1e-3  # need alone
+
+    cfg = apply_overrides(preset_config("fast"), ["data.eps_from_events=false"])
+    assert load_training_data(cfg, dark).preset.tonemap_eps == 0.1
+    cfg = apply_overrides(preset_config("fast"), ["data.tonemap_eps=0.05"])  # the user's wins
+    assert load_training_data(cfg, dark).preset.tonemap_eps == 0.05
+
+
+def test_a_preset_eps_below_the_cap_is_kept(scene):
+    from hybridneus.api import load_training_data
+    from hybridneus.config import apply_overrides, preset_config
+
+    cfg = apply_overrides(preset_config("fast"), ["data.eps_max=0.001"])
+    root = scene(4)
+    (root / "scene.json").write_text('{"preset": {"tonemap_eps": 1e-5}}')  # the real groups'
+    assert load_training_data(cfg, root).preset.tonemap_eps == 1e-5
+    assert cfg.data.tonemap_eps == 1e-5
