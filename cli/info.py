@@ -71,6 +71,14 @@ def info(
         ptable.add_row(key, str(value))
     console.print(ptable)
     console.print(f"preset source: {ds.preset_source}", markup=False, highlight=False)
+    if "train" in ds.splits:
+        from hybridneus.config import DataConfig
+        from hybridneus.data.contrast import event_extent, loss_eps
+
+        eps_max = DataConfig().eps_max
+        eps, why = loss_eps(p.tonemap_eps, event_extent(ds.splits["train"], p), eps_max)
+        console.print(f"fit: tonemap eps {eps:g}, {why} (data.eps_from_events)",
+                      markup=False, highlight=False)
     for s in ds.splits.values():
         console.print(f"{s.name}: events from {s.events.path}, polarity stored as "
                       f"{s.events.polarity_note}", markup=False, highlight=False)

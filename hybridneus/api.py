@@ -8,7 +8,6 @@ Example:
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -76,23 +75,16 @@ def _eps_from_events(cfg: Config, dataset: Any) -> Any:
     import logging
 
     from hybridneus.data import apply_overrides as preset_overrides
-    from hybridneus.data.contrast import event_extent, reachable_eps
+    from hybridneus.data.contrast import event_extent, loss_eps
 
     p = dataset.preset
     change = event_extent(dataset[cfg.data.split], p)
-    need = reachable_eps(change) if change else math.inf
-    cap = min(need, cfg.data.eps_max) if cfg.data.eps_max > 0 else need
-    if cap >= p.tonemap_eps:
-        cfg.data.tonemap_eps = float(p.tonemap_eps)
-        return dataset
-    eps = float(f"{cap:.2g}")
+    eps, why = loss_eps(p.tonemap_eps, change, cfg.data.eps_max)
     cfg.data.tonemap_eps = eps
+    if eps == p.tonemap_eps:
+        return dataset
     dataset = copy.copy(dataset)
     dataset.preset = preset_overrides(p, {"tonemap_eps": eps})
-    if cap < cfg.data.eps_max or cfg.data.eps_max <= 0:
-        why = f"the events ask for log-brightness changes up to {change:.2f} in one window"
-    else:
-        why = f"data.eps_max {cfg.data.eps_max:g}"
     msg = (f"tonemap eps {eps:g} (preset {p.tonemap_eps:g}): {why} (data.eps_from_events=false "
            "keeps the preset's)")
     logging.getLogger("hybridneus").info(msg)

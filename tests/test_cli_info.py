@@ -35,6 +35,8 @@ def test_info_table(run_cli, scene):
     assert "preset source: path (real/multimeter)" in out
     assert "-0.406" in out
     assert "0/1 (converted to -1/+1)" in out
+    # the real group's eps (1e-5) is below the cap, and random events ask for little
+    assert "fit: tonemap eps 1e-05, the preset's" in out
 
 
 def test_info_override_and_split(run_cli, scene):
@@ -50,6 +52,7 @@ def test_info_fallback_is_reported(run_cli, tmp_path):
     code, out, _ = run_cli("info", str(root), *SIZE_ARGS)
     assert code == 0
     assert "custom" in out and "fallback" in out
+    assert "fit: tonemap eps 0.001, capped at data.eps_max 0.001" in out  # not the nerf 0.1
 
 
 def test_info_broken_dataset_exit_2(run_cli, scene):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hybridneus.data import load_dataset
-from hybridneus.data.contrast import event_extent, reachable_eps
+from hybridneus.data.contrast import event_extent, loss_eps, reachable_eps
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_data_builder import write_split  # noqa: E402
@@ -48,6 +48,15 @@ def test_extent_is_threshold_times_the_window_count(scene):
 
     shifted = apply_overrides(p, {"polarity_offset": -0.4})  # each event counts -1.4
     assert event_extent(ds.splits["train"], shifted) == pytest.approx(0.25 * 30 * 1.4)
+
+
+def test_loss_eps_takes_the_lowest_bound_and_says_which():
+    assert loss_eps(0.1, 1.0, 1e-3) == (1e-3, "capped at data.eps_max 0.001")
+    eps, why = loss_eps(0.1, 7.5, 1e-3)
+    assert eps == float(f"{reachable_eps(7.5):.2g}") and "up to 7.50" in why
+    assert loss_eps(1e-5, 7.5, 1e-3)[0] == 1e-5  # a preset below both is kept
+    assert loss_eps(0.1, None, 0)[0] == 0.1  # no bound at all
+    assert loss_eps(0.1, None, 1e-3)[0] == 1e-3
 
 
 def test_reachable_eps_gives_the_range_asked_for():

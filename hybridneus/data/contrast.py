@@ -19,7 +19,7 @@ import numpy as np
 from hybridneus.data.dataset import SplitData
 from hybridneus.data.presets import ScenePreset
 
-__all__ = ["event_extent", "reachable_eps"]
+__all__ = ["event_extent", "reachable_eps", "loss_eps"]
 
 
 def event_extent(
@@ -69,3 +69,26 @@ def reachable_eps(change: float, margin: float = 1.2) -> float:
         eps > 0.
     """
     return 1.0 / math.expm1(margin * change)
+
+
+def loss_eps(preset_eps: float, change: float | None, eps_max: float = 1e-3) -> tuple[float, str]:
+    """The tonemap eps training uses: the preset's, capped at ``eps_max`` and at
+    :func:`reachable_eps` of the events' ``change`` (2 significant digits), and why.
+
+    Args:
+        preset_eps: the preset's ``tonemap_eps``.
+        change: :func:`event_extent` of the training split (``None``: no bound from events).
+        eps_max: cap on the preset's eps; <= 0 for none.
+
+    Returns:
+        ``(eps, reason)``: ``reason`` is one line saying which bound decided it.
+    """
+    need = reachable_eps(change) if change else math.inf
+    cap = min(need, eps_max) if eps_max > 0 else need
+    if cap >= preset_eps:
+        return float(preset_eps), "the preset's (within data.eps_max and what the events need)"
+    if need <= cap:
+        why = f"the events ask for log-brightness changes up to {change:.2f} in one window"
+    else:
+        why = f"capped at data.eps_max {eps_max:g}"
+    return float(f"{cap:.2g}"), why

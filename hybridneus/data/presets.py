@@ -325,6 +325,6 @@ def resolve_preset(path: str | os.PathLike) -> tuple[ScenePreset, str]:
         return from_path
     return (
         replace(_NERF, group="custom", scene=resolved.name),
-        "fallback: path names no nerf/real/nextnextgen scene and there is no scene.json, "
+        "fallback: path names no nerf/real/nextnextgen scene and no scene.json preset, "
         "using nerf group values",
     )
