@@ -83,6 +83,7 @@ def _eps_from_events(cfg: Config, dataset: Any) -> Any:
     cfg.data.tonemap_eps = eps
     if eps == p.tonemap_eps:
         return dataset
+    cfg.data.eps_start = float(p.tonemap_eps)
     dataset = copy.copy(dataset)
     dataset.preset = preset_overrides(p, {"tonemap_eps": eps})
     msg = (f"tonemap eps {eps:g} (preset {p.tonemap_eps:g}): {why} (data.eps_from_events=false "

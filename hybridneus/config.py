@@ -151,10 +151,13 @@ class DataConfig:
     crop_from_events: bool = True  # shrink the crop to the events' visual hull (if no crop set)
     eps_from_events: bool = True  # cap tonemap_eps (eps_max, and what the events' changes need)
     eps_max: float = 1e-3  # eps_from_events: the largest tonemap eps the loss uses
+    eps_start: float | None = None  # eps at step 0 (eps_from_events sets it when it lowers eps)
+    eps_anneal_steps: int = 500  # steps over which eps goes from eps_start to tonemap_eps
 
     def overrides(self) -> dict[str, Any]:
         """The preset overrides that are set, as ``{name: value}`` for the data module."""
-        skip = {"path", "split", "crop_from_events", "eps_from_events", "eps_max"}
+        skip = {"path", "split", "crop_from_events", "eps_from_events", "eps_max", "eps_start",
+                "eps_anneal_steps"}
         out = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)

@@ -358,6 +358,18 @@ class Trainer:
         grad_p, grad_s = grad.chunk(2)
         return L.curvature_loss(grad_p, grad_s), grad
 
+    def tonemap_eps(self) -> float:
+        """The event loss's eps at this step: ``data.eps_start`` eased geometrically into the
+        scene's eps over ``data.eps_anneal_steps``. A small eps from the first step lets the
+        largest event targets pull hard on dark colours before there is a surface to colour,
+        and a 256-pixel xylophone fit lost its surface by step 100 that way; a large one
+        never reaches those targets."""
+        d = self.cfg.data
+        end = self.scene["tonemap_eps"]
+        if not d.eps_start or d.eps_anneal_steps <= 0 or self.step >= d.eps_anneal_steps:
+            return end
+        return d.eps_start * (end / d.eps_start) ** (self.step / d.eps_anneal_steps)
+
     def _background_matter_on(self) -> bool:
         """The background-matter term waits until the surface and its colours have formed: the
         initial sphere's colour is the untrained head's, and nothing defends it yet."""
@@ -394,7 +406,7 @@ class Trainer:
         if self.frames is None:
             c0, c1 = out.color[:n], out.color[n:]
             terms["event"] = L.event_loss(
-                c0, c1, batch.target, batch.bayer, self.scene["tonemap_eps"]
+                c0, c1, batch.target, batch.bayer, self.tonemap_eps()
             )
         else:
             terms["rgb"] = L.rgb_loss(out.color, frame_batch.color)
