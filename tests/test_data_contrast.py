@@ -77,6 +77,7 @@ def test_fit_lowers_eps_to_the_cap_and_further_where_the_events_need_it(scene):
     assert eps == cfg.data.tonemap_eps  # recorded, so that a resume keeps it
     assert math.log1p(1 / eps) >= 7.5 and 1e-5 < eps < 1e-3
     assert any("up to 7.50 in one window" in note for note in data.notes)
+    assert cfg.data.eps_start == 0.1  # training eases in from the preset's eps
 
     faint = scene(4)  # 1.0 log units: within range, only the cap applies
     cfg = preset_config("fast")
@@ -103,3 +104,24 @@ def test_a_preset_eps_below_the_cap_is_kept(scene):
     (root / "scene.json").write_text('{"preset": {"tonemap_eps": 1e-5}}')  # the real groups'
     assert load_training_data(cfg, root).preset.tonemap_eps == 1e-5
     assert cfg.data.tonemap_eps == 1e-5
+    assert cfg.data.eps_start is None  # nothing lowered, nothing to ease in
+
+
+def test_training_eases_eps_from_the_preset_into_the_lowered_one():
+    from types import SimpleNamespace
+
+    from hybridneus.config import preset_config
+    from hybridneus.training.trainer import Trainer
+
+    cfg = preset_config("fast")
+    cfg.data.eps_start, cfg.data.eps_anneal_steps = 0.1, 500
+    t = SimpleNamespace(cfg=cfg, scene={"tonemap_eps": 0.001}, step=0)
+    at = {}
+    for step in (0, 250, 500, 5000):
+        t.step = step
+        at[step] = Trainer.tonemap_eps(t)
+    assert at[0] == pytest.approx(0.1) and at[250] == pytest.approx(0.01)  # geometric
+    assert at[500] == at[5000] == 0.001
+    cfg.data.eps_start = None  # not lowered: the scene's eps from the first step
+    t.step = 0
+    assert Trainer.tonemap_eps(t) == 0.001
