@@ -25,28 +25,26 @@ from pathlib import Path
 
 import numpy as np
 
+from hybridneus.fileio import atomic_dir
+
 
 def pack(dataset: Path, out: Path) -> int:
     """Copy what a fit reads from ``dataset`` into ``out / dataset.name``; return its bytes."""
     if not (dataset / "scene.json").is_file():
         raise SystemExit(f"{dataset}: no scene.json (not a simulated dataset folder)")
     dst = out / dataset.name
-    tmp = out / f".{dataset.name}.tmp"  # renamed into place when complete
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    (tmp / "train" / "events").mkdir(parents=True)
-    shutil.copy2(dataset / "scene.json", tmp / "scene.json")
-    for sub in ("pose", "intrinsics"):
-        shutil.copytree(dataset / "train" / sub, tmp / "train" / sub)
-    for src in sorted((dataset / "train" / "events").iterdir()):
-        if src.suffix == ".npz":
-            with np.load(src) as z:
-                np.savez_compressed(tmp / "train" / "events" / src.name, **{k: z[k] for k in z})
-        else:
-            shutil.copy2(src, tmp / "train" / "events" / src.name)
-    if dst.exists():
-        shutil.rmtree(dst)
-    tmp.rename(dst)
+    with atomic_dir(dst) as tmp:
+        (tmp / "train" / "events").mkdir(parents=True)
+        shutil.copy2(dataset / "scene.json", tmp / "scene.json")
+        for sub in ("pose", "intrinsics"):
+            shutil.copytree(dataset / "train" / sub, tmp / "train" / sub)
+        for src in sorted((dataset / "train" / "events").iterdir()):
+            dst_file = tmp / "train" / "events" / src.name
+            if src.suffix == ".npz":
+                with np.load(src) as z:
+                    np.savez_compressed(dst_file, **{k: z[k] for k in z})
+            else:
+                shutil.copy2(src, dst_file)
     return sum(p.stat().st_size for p in dst.rglob("*") if p.is_file())
 
 

@@ -14,24 +14,22 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import sys
 from pathlib import Path
 
+from hybridneus.fileio import atomic_dir
+
 
 def strip(src: Path, dst: Path) -> None:
-    """Write ``dst`` (replaced atomically) as a linked copy of ``src`` without the preset."""
+    """Write ``dst`` as a linked copy of ``src`` without the preset (an existing ``dst`` is
+    replaced only once the copy is complete)."""
     meta = json.loads((src / "scene.json").read_text())
     meta.pop("preset", None)
-    tmp = dst.with_name(dst.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    for name in ("train", "test", "validation", "gt_mesh.ply"):
-        if (src / name).exists():
-            os.symlink((src / name).resolve(), tmp / name)
-    (tmp / "scene.json").write_text(json.dumps(meta, indent=1))
-    shutil.rmtree(dst, ignore_errors=True)
-    tmp.rename(dst)
+    with atomic_dir(dst) as tmp:
+        for name in ("train", "test", "validation", "gt_mesh.ply"):
+            if (src / name).exists():
+                os.symlink((src / name).resolve(), tmp / name)
+        (tmp / "scene.json").write_text(json.dumps(meta, indent=1))
 
 
 def main() -> int:
