@@ -37,6 +37,8 @@ class GridConfig:
     n_frequencies: int = 8  # kind=frequency: number of octave bands (EventNeuS: 8 to 9)
     frequency_start: int = 0  # kind=frequency: bands active at step 0 (N_fmin)
     frequency_anneal_at: float = 0.5  # kind=frequency: fraction of training at all bands
+    domain: str = "volume"  # grid span: crop (a cube around the crop box) or volume ([-1, 1]^3)
+    domain_margin: float = 0.3  # domain=crop: cube half-side = (1 + this) x the box's largest half
 
 
 @dataclass

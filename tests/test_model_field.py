@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from hybridneus.config import FieldConfig, GridConfig, preset_config
-from hybridneus.model.field import HybridField, crop_sdf
+from hybridneus.errors import ConfigError
+from hybridneus.model.field import VOLUME_BOX, HybridField, crop_sdf, grid_box
 from hybridneus.model.protocol import Field
 
 
@@ -56,6 +57,44 @@ def test_public_sdf_is_cropped_to_the_cylinder():
     assert torch.allclose(crop_sdf(p, f.crop)[2:], torch.tensor([0.05, 0.05]), atol=1e-6)
     # The initial sphere is capped to fit the crop radius.
     assert f.init_radius == pytest.approx(0.18)
+
+
+def test_grid_box_is_a_cube_around_the_crop_or_the_whole_volume():
+    lo_hi = np.array(grid_box((0.2, -0.3, 0.1), "crop", margin=0.5))
+    # Centred on the crop's box (y from -0.3 to 0.1), half-side 1.5 x its largest half (0.2).
+    np.testing.assert_allclose(lo_hi, [-0.3, -0.4, -0.3, 0.3, 0.2, 0.3], atol=1e-6)
+    assert grid_box((0.2, -0.3, 0.1), "volume") == VOLUME_BOX
+    # A crop whose cube would reach past the volume gets the volume itself.
+    assert grid_box((0.8, -0.8, 0.8), "crop", margin=0.3) == VOLUME_BOX
+    with pytest.raises(ConfigError, match="grid.domain"):
+        grid_box((0.2, -0.3, 0.1), "sphere")
+
+
+def test_the_grid_spans_its_box_and_old_checkpoints_keep_the_volume():
+    torch.manual_seed(0)
+    grid = GridConfig(n_levels=4, log2_table_size=12, base_resolution=8, max_resolution=32)
+    crop = (0.2, -0.2, 0.2)
+    assert grid.domain == "volume"  # the default
+    grid.domain = "crop"
+    f = HybridField(grid, FieldConfig(), crop=crop)
+    np.testing.assert_allclose(f.grid_box.numpy(), grid_box(crop), atol=1e-6)
+    # Geometric init zeroes the weights reading the grid; give them values first.
+    torch.nn.init.normal_(f.sdf_net.layers[0].weight, std=0.1)
+    f.update_step(10**6, 1)
+    p = torch.rand(64, 3) * 0.4 - 0.2
+
+    def read_at(field, unit):
+        return field.sdf_net(torch.cat([p, field.encoding(unit)], dim=-1))[:, 0]
+
+    lo, hi = f.grid_box[:3], f.grid_box[3:]
+    torch.testing.assert_close(f.raw_sdf(p), read_at(f, (p - lo) / (hi - lo)))
+    # A checkpoint from before grid.domain (no grid_box) was trained on the whole volume.
+    g = HybridField(grid, FieldConfig(), crop=crop)
+    g.load_state_dict({k: v for k, v in f.state_dict().items() if k != "grid_box"})
+    g.update_step(10**6, 1)
+    assert torch.equal(g.grid_box, torch.tensor(VOLUME_BOX))
+    torch.testing.assert_close(g.raw_sdf(p), read_at(g, (p + 1) / 2))
+    assert not torch.allclose(f.raw_sdf(p), g.raw_sdf(p))
 
 
 def test_eikonal_gradient_reaches_the_grid_tables():

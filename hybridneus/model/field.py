@@ -1,8 +1,8 @@
 """The hybrid NeuS field: a feature grid with small SDF and colour heads.
 
-``HybridField`` implements :class:`hybridneus.model.protocol.Field`. World points in the
-reconstruction volume [-1, 1]^3 are encoded by a multiresolution grid at ``(x + 1) / 2``
-(or by annealed frequencies for the ``eventneus`` preset), and
+``HybridField`` implements :class:`hybridneus.model.protocol.Field`. World points are encoded
+by a multiresolution grid spanning :func:`grid_box` (the whole volume [-1, 1]^3 by default,
+or a cube around the crop box), or by annealed frequencies for the ``eventneus`` preset, and
 
 - the SDF head maps ``[x, encoding]`` through Softplus(beta=100) layers to
   ``1 + feature_dim`` values (SDF first), geometrically initialised to a sphere;
@@ -86,6 +86,42 @@ def crop_aabb(crop: torch.Tensor) -> torch.Tensor:
     return torch.cat([lo, hi])
 
 
+#: The whole reconstruction volume, [-1, 1]^3 as (lo, hi): the grid's span before
+#: ``grid.domain`` existed, and what checkpoints without a saved ``grid_box`` were trained on.
+VOLUME_BOX = (-1.0, -1.0, -1.0, 1.0, 1.0, 1.0)
+
+
+def grid_box(crop: tuple[float, float, float], domain: str = "crop",
+             margin: float = 0.3) -> tuple[float, ...]:
+    """The box (lo_x, lo_y, lo_z, hi_x, hi_y, hi_z) that a field's feature grid spans.
+
+    Args:
+        crop: (radius, y_min, y_max) of the crop cylinder.
+        domain: ``crop``: the cube centred on the crop's box (clipped to [-1, 1]^3) whose
+            half-side is ``1 + margin`` times the box's largest half-extent, or the whole
+            volume when that cube is at least as large; ``volume``: [-1, 1]^3.
+        margin: growth of the cube beyond the crop's box, so that the regularisers' random
+            points (the box grown by ``loss.random_box_margin`` of its side on each side: 0.3
+            of the half-extent at the default 0.15) stay inside the grid.
+
+    Raises:
+        ConfigError: unknown ``domain`` or a negative ``margin``.
+    """
+    if domain not in ("crop", "volume"):
+        raise ConfigError(f"grid.domain: unknown {domain!r}; expected crop or volume")
+    if margin < 0:
+        raise ConfigError(f"grid.domain_margin: must be >= 0, got {margin}")
+    if domain == "volume":
+        return VOLUME_BOX
+    box = crop_aabb(torch.tensor([float(c) for c in crop])).tolist()
+    lo, hi = box[:3], box[3:]
+    half = (1.0 + margin) * max((b - a) / 2 for a, b in zip(lo, hi, strict=True))
+    if half >= 1.0:
+        return VOLUME_BOX
+    centre = [(a + b) / 2 for a, b in zip(lo, hi, strict=True)]
+    return tuple([c - half for c in centre] + [c + half for c in centre])
+
+
 class HybridField(nn.Module):
     """Grid-encoded NeuS SDF with a view-dependent colour head (see the module docstring).
 
@@ -119,6 +155,9 @@ class HybridField(nn.Module):
         self.grid_config = grid
         self.field_config = field
         self.encoding, self._unit_cube = _make_position_encoding(grid)
+        # Saved with the weights: a checkpoint keeps the span it was trained on.
+        box = grid_box(crop, grid.domain, grid.domain_margin)
+        self.register_buffer("grid_box", torch.tensor(box, dtype=torch.float32))
         enc_dim = int(self.encoding.out_dim)
         self.sdf_net = make_mlp(
             3 + enc_dim,
@@ -216,7 +255,11 @@ class HybridField(nn.Module):
         Note:
             Differentiable to second order in ``points`` (for the Eikonal term).
         """
-        enc_in = (points + 1.0) * 0.5 if self._unit_cube else points
+        if self._unit_cube:
+            lo, hi = self.grid_box[:3], self.grid_box[3:]
+            enc_in = (points - lo) / (hi - lo)
+        else:
+            enc_in = points
         h = torch.cat([points, self.encoding(enc_in).to(points.dtype)], dim=-1)
         out = self.sdf_net(h)
         return out[:, 0], out[:, 1:]
@@ -334,6 +377,12 @@ class HybridField(nn.Module):
                 outs.append(self.radiance(p, dd, grad, feats))
         out = torch.cat(outs) if outs else pts
         return out.cpu().numpy() if was_numpy else out
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):  # noqa: ANN001
+        # Checkpoints written before grid.domain existed hold no grid_box: their grid
+        # spanned the whole volume.
+        state_dict.setdefault(prefix + "grid_box", torch.tensor(VOLUME_BOX))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     # ------------------------------------------------------------------ init
 
