@@ -378,7 +378,9 @@ class HybridField(nn.Module):
         out = torch.cat(outs) if outs else pts
         return out.cpu().numpy() if was_numpy else out
 
-    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):  # noqa: ANN001
+    def _load_from_state_dict(
+        self, state_dict: dict[str, Any], prefix: str, *args: Any, **kwargs: Any
+    ) -> None:
         # Checkpoints written before grid.domain existed hold no grid_box: their grid
         # spanned the whole volume.
         state_dict.setdefault(prefix + "grid_box", torch.tensor(VOLUME_BOX))
