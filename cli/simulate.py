@@ -58,6 +58,19 @@ def simulate(
         help="Polarity imbalance o: C_pos = C(1+o), C_neg = C(1-o); written to the preset.")]
         = None,
     seed: Annotated[int, typer.Option(help="Seed of the noise generators.")] = 0,
+    light: Annotated[str | None, typer.Option(
+        help="World direction towards the light, X,Y,Z (+y is up). [default: 0.4,1,0.6]",
+        show_default=False)] = None,
+    headlight: Annotated[bool, typer.Option(
+        "--headlight", help="Light from the camera instead of --light (shading that moves "
+                            "with the view).")] = False,
+    ambient: Annotated[float, typer.Option(
+        help="Ambient term of the Lambertian shading (1 with --diffuse 0: unlit albedo).")]
+        = 0.35,
+    diffuse: Annotated[float, typer.Option(help="Diffuse (n . l) term.")] = 0.65,
+    background: Annotated[str | None, typer.Option(
+        help="Background sRGB in [0, 1]: one grey value or R,G,B; written to the preset. "
+             "[default: 159/255 grey]", show_default=False)] = None,
     val_views: Annotated[int, typer.Option(
         help="Views of the validation split (a circle at 30 deg elevation); 0 skips it.")] = 100,
     test_views: Annotated[int, typer.Option(
@@ -83,6 +96,7 @@ def simulate(
         REALISTIC_NOISE,
         EventModel,
         NoiseConfig,
+        Shading,
         SimulationConfig,
         simulate_dataset,
     )
@@ -98,13 +112,20 @@ def simulate(
     for key, value in changes.items():
         if value < 0:
             raise ConfigError(f"--{key.replace('_', '-')}: must be >= 0, got {value}")
+    looks: dict = {"ambient": ambient, "diffuse": diffuse, "headlight": headlight}
+    if light is not None:
+        looks["light_dir"] = _floats("--light", light, (3,))
+    if background is not None:
+        bg = _floats("--background", background, (1, 3))
+        looks["background"] = bg * 3 if len(bg) == 1 else bg
     try:
+        shading = Shading(**looks)
         config = SimulationConfig(
             n_views=views, revolutions=revolutions, spiral=spiral.value, width=width,
             height=height, fov_y_deg=fov, object_radius=object_radius, distortion=(k1, k2),
             supersample=supersample,
             events=EventModel(threshold=threshold, eps=eps, polarity_offset=offset),
-            noise=replace(base_noise, **changes), seed=seed, val_views=val_views,
+            noise=replace(base_noise, **changes), shading=shading, seed=seed, val_views=val_views,
             test_views=test_views, n_threads=threads, write_rgb=rgb)
     except ValueError as exc:
         raise ConfigError(f"simulate: {exc}") from None
@@ -113,3 +134,17 @@ def simulate(
         typer.echo(f"{name}: {split['n_views']} views, {split['n_events']:,} events "
                    f"({split['trajectory']})")
     typer.echo(f"wrote {out} in {info['seconds']:.1f} s")
+
+
+def _floats(option: str, text: str, counts: tuple[int, ...]) -> tuple[float, ...]:
+    """Parse a comma-separated list of numbers with one of the allowed lengths."""
+    from hybridneus.errors import ConfigError
+
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) not in counts:
+        want = " or ".join(str(c) for c in counts)
+        raise ConfigError(f"{option}: expected {want} comma-separated numbers, got {text!r}")
+    return values

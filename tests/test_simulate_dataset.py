@@ -227,9 +227,13 @@ def test_cli_simulate_builtin_and_errors(tmp_path):
     out = tmp_path / "thin"
     res = _cli("simulate", "builtin:thin", str(out), "--views", "16", "--width", "32",
                "--height", "24", "--val-views", "0", "--test-views", "6", "--revolutions", "2",
-               "--spiral", "even", "--noise", "real", "-q")
+               "--spiral", "even", "--noise", "real", "--background", "0.8", "--headlight",
+               "--ambient", "0.2", "--diffuse", "0.9", "-q")
     assert res.returncode == 0, res.stderr
     info = json.loads((out / "scene.json").read_text())
+    assert info["preset"]["background"] == [0.8] * 3
+    assert info["render"]["headlight"] and info["render"]["ambient"] == 0.2
+    assert info["config"]["shading"]["diffuse"] == 0.9
     assert info["trajectory"] == "even" and info["splits"]["train"]["trajectory"] == "even"
     assert info["preset"]["polarity_offset"] == -0.4 and info["noise"]["threshold_sigma"] > 0
     assert set(info["splits"]) == {"train", "test"}
@@ -240,6 +244,13 @@ def test_cli_simulate_builtin_and_errors(tmp_path):
     assert not (tmp_path / "o").exists()
     neg = _cli("simulate", "builtin:thin", str(tmp_path / "o"), "--views", "1")
     assert neg.returncode == 2 and neg.stderr.startswith("error: ")
+    for opt, value, msg in [("--light", "1,2", "--light: expected 3 comma-separated numbers"),
+                            ("--background", "1.5", "background must be 3 sRGB values"),
+                            ("--background", "grey", "--background: expected 1 or 3")]:
+        res = _cli("simulate", "builtin:thin", str(tmp_path / "o"), opt, value)
+        assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+        assert msg in res.stderr
+        assert not (tmp_path / "o").exists()
     assert _cli("simulate", "--help").returncode == 0
 
 

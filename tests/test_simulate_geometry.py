@@ -9,6 +9,7 @@ from hybridneus.errors import MeshError
 from hybridneus.simulate import (
     PinholeCamera,
     Renderer,
+    Shading,
     builtin_scene,
     circle,
     even_spiral,
@@ -213,18 +214,27 @@ def _shade_reference(renderer, prim, bary, normals, dirs):
             albedo[i] *= sample_bilinear(mesh.textures[t].astype(np.float64) ** 2.2,
                                          uv[None].astype(np.float32))[0]
     n = np.where((normals * dirs).sum(1, keepdims=True) > 0, -normals, normals)
-    light = np.asarray(renderer.shading.light_dir) / np.linalg.norm(renderer.shading.light_dir)
-    cos = np.clip(n @ light, 0, None)[:, None]
+    if renderer.shading.headlight:
+        light = -dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        cos = np.clip((n * light).sum(1), 0, None)[:, None]
+    else:
+        light = np.asarray(renderer.shading.light_dir) / np.linalg.norm(renderer.shading.light_dir)
+        cos = np.clip(n @ light, 0, None)[:, None]
     return albedo * (renderer.shading.ambient + renderer.shading.diffuse * cos)
 
 
-def test_fast_shading_matches_reference():
+@pytest.mark.parametrize("shading", [
+    Shading(),
+    Shading(light_dir=(-1.0, -0.2, 0.3), ambient=0.1, diffuse=1.2),
+    Shading(headlight=True),
+], ids=["default", "other-light", "headlight"])
+def test_fast_shading_matches_reference(shading):
     from hybridneus.simulate.scene_mesh import concatenate_parts
 
     # textured device + vertex-coloured ring of the thin scene: all three colour paths
     mesh = concatenate_parts([builtin_scene("device"), builtin_scene("thin")])
     cam = PinholeCamera.from_fov(8, 6, 55.0)
-    r = Renderer(mesh, cam, supersample=1)
+    r = Renderer(mesh, cam, supersample=1, shading=shading)
     rng = np.random.default_rng(0)
     prim = rng.integers(0, mesh.n_faces, 500)
     bary = rng.dirichlet([1, 1, 1], 500)[:, 1:].astype(np.float32)
@@ -233,6 +243,38 @@ def test_fast_shading_matches_reference():
     assert (mesh.face_texture[prim] >= 0).any() and r._face_varying[prim].any()
     fast = r._shade(prim, bary, normals, dirs)
     np.testing.assert_allclose(fast, _shade_reference(r, prim, bary, normals, dirs), atol=2e-5)
+
+
+def test_unlit_headlight_and_background_renders():
+    """Unlit (ambient 1, diffuse 0) returns the albedo whatever the light; a headlight makes a
+    surface facing the camera as bright as ambient + diffuse; misses take the background."""
+    mesh = builtin_scene("device")
+    norm = normalization_for(mesh, 0.4)
+    world = mesh.transformed(norm.scale, np.asarray(norm.translation))
+    cam = PinholeCamera.from_fov(24, 18, 55.0)
+    traj = seiffert_spiral(12, 2)
+    c2w = look_at_origin(traj.directions, traj.azimuth, 1 / 1.1)[[3, 9]]
+    bg = (0.1, 0.5, 0.9)
+    unlit = [Renderer(world, cam, 1, Shading(light_dir=d, ambient=1.0, diffuse=0.0,
+                                             background=bg)).render(c2w)[0]
+             for d in [(0.0, 1.0, 0.0), (1.0, -1.0, 0.0)]]
+    np.testing.assert_array_equal(unlit[0], unlit[1])
+    frames, cover = Renderer(world, cam, 1, Shading(background=bg)).render(c2w)
+    np.testing.assert_allclose(frames[cover == 0], np.broadcast_to(bg, frames[cover == 0].shape),
+                               atol=1e-6)
+    # Lambert never brightens beyond the unlit albedo when ambient + diffuse = 1
+    lit = Renderer(world, cam, 1, Shading(ambient=0.0, diffuse=1.0, headlight=True,
+                                          background=bg)).render(c2w)[0]
+    assert np.all(lit[cover == 1] <= unlit[0][cover == 1] + 1e-6)
+    assert np.any(lit[cover == 1] < unlit[0][cover == 1] - 0.05)
+
+
+def test_shading_validation():
+    for bad in [dict(light_dir=(0.0, 0.0, 0.0)), dict(ambient=-0.1),
+                dict(ambient=0.0, diffuse=0.0), dict(background=(0.5, 0.5, 1.5)),
+                dict(background=(0.5, 0.5))]:
+        with pytest.raises(ValueError):
+            Shading(**bad)
 
 
 def test_public_names_resolve():

@@ -68,6 +68,8 @@ class SimulationConfig:
         supersample: rays per pixel along each axis. Default: 2 (4 rays per pixel).
         events: thresholds and log mapping (:class:`EventModel`).
         noise: sensor noise (:class:`NoiseConfig`), off by default.
+        shading: light and background (:class:`Shading`); the background also goes into the
+            preset of scene.json.
         seed: seed of the noise generators (each split derives its own).
         val_views, test_views: views of the validation and test splits (0 skips a split).
         batch_views: views per ``cast_rays`` call.
@@ -87,6 +89,7 @@ class SimulationConfig:
     supersample: int = 2
     events: EventModel = field(default_factory=EventModel)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
+    shading: Shading = field(default_factory=Shading)
     seed: int = 0
     val_views: int = 100
     test_views: int = 200
@@ -285,7 +288,7 @@ def simulate_dataset(
     world = source_mesh.transformed(norm.scale, np.asarray(norm.translation))
     k1, k2 = config.distortion
     camera = PinholeCamera.from_fov(config.width, config.height, config.fov_y_deg, k1, k2)
-    shading = Shading()
+    shading = config.shading
     renderer = Renderer(world, camera, config.supersample, shading, config.n_threads)
     trajs = split_trajectories(config)
     crop_r, crop_y0, crop_y1 = crop_cylinder(world.vertices[np.unique(world.faces)])
@@ -329,7 +332,7 @@ def _scene_json(config, source_mesh, scene_name, norm, camera, shading, results,
             "renderer": "open3d RaycastingScene (CPU)", "supersample": config.supersample,
             "light_dir": list(shading.light_dir), "ambient": shading.ambient,
             "diffuse": shading.diffuse, "background": list(shading.background),
-            "gamma": 2.2, "two_sided": True,
+            "headlight": shading.headlight, "gamma": 2.2, "two_sided": True,
         },
         "events": {
             "threshold": ev.threshold, "eps": ev.eps, "polarity_offset": ev.polarity_offset,

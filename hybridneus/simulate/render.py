@@ -3,8 +3,10 @@
 Shading model (all in linear light, gamma 2.2 as in the event model):
 ``linear = albedo**2.2 * (ambient + diffuse * max(0, n . l))`` with a fixed world-space light
 ``l`` (default from above-front-right, ``normalize(0.4, 1.0, 0.6)``), ``ambient = 0.35``,
-``diffuse = 0.65``. Surfaces are two-sided: the geometric normal is flipped to face the
-camera, since many meshes are not closed. Each pixel averages ``supersample**2`` rays on a
+``diffuse = 0.65``; or, with ``headlight``, a light at the camera (``l`` = the reversed ray,
+so the shading changes with the view, as with a flash or a ring light). Surfaces are
+two-sided: the geometric normal is flipped to face the camera, since many meshes are not
+closed. Each pixel averages ``supersample**2`` rays on a
 regular sub-pixel grid in linear light, then is encoded back to sRGB with ``x**(1/2.2)``.
 Rays that miss take the background colour (sRGB 159/255 by default).
 """
@@ -77,12 +79,33 @@ class PinholeCamera:
 
 @dataclass(frozen=True)
 class Shading:
-    """Light and background of the renderer (sRGB background, world-space light direction)."""
+    """Light and background of the renderer.
+
+    Attributes:
+        light_dir: world-space direction towards the light (normalised on use); ignored with
+            ``headlight``.
+        ambient, diffuse: ``linear = albedo**2.2 * (ambient + diffuse * max(0, n . l))``;
+            ``ambient=1, diffuse=0`` renders the albedo unlit.
+        background: sRGB colour in [0, 1] of rays that miss.
+        headlight: light from the camera itself instead of ``light_dir``.
+    """
 
     light_dir: tuple[float, float, float] = (0.4, 1.0, 0.6)
     ambient: float = 0.35
     diffuse: float = 0.65
     background: tuple[float, float, float] = (159 / 255, 159 / 255, 159 / 255)
+    headlight: bool = False
+
+    def __post_init__(self) -> None:
+        if len(self.light_dir) != 3 or not np.all(np.isfinite(self.light_dir)) \
+                or not np.any(self.light_dir):
+            raise ValueError(f"light direction must be 3 finite numbers, not all 0: "
+                             f"{self.light_dir}")
+        if not (self.ambient >= 0 and self.diffuse >= 0) or self.ambient + self.diffuse <= 0:
+            raise ValueError(f"ambient and diffuse must be >= 0 with a positive sum: "
+                             f"{self.ambient}, {self.diffuse}")
+        if len(self.background) != 3 or not all(0.0 <= c <= 1.0 for c in self.background):
+            raise ValueError(f"background must be 3 sRGB values in [0, 1]: {self.background}")
 
 
 class Renderer:
@@ -229,11 +252,15 @@ class Renderer:
                 cuv = self._corner_uv[prim[sel]]
                 uv = w0[sel] * cuv[:, 0] + w1[sel] * cuv[:, 1] + w2[sel] * cuv[:, 2]
                 albedo[sel] *= sample_bilinear(tex, uv)
-        # Two-sided: flipping the normal towards the camera flips the sign of n.l.
-        n_dot_l = normals @ self._light
         n_dot_d = np.einsum("ij,ij->i", normals, ray_dirs)
-        cos = np.where(n_dot_d > 0, -n_dot_l, n_dot_l)
-        np.maximum(cos, 0.0, out=cos)
+        if self.shading.headlight:
+            # The light sits at the eye, so a two-sided surface always faces it.
+            cos = np.abs(n_dot_d) / np.linalg.norm(ray_dirs, axis=1)
+        else:
+            # Two-sided: flipping the normal towards the camera flips the sign of n.l.
+            n_dot_l = normals @ self._light
+            cos = np.where(n_dot_d > 0, -n_dot_l, n_dot_l)
+            np.maximum(cos, 0.0, out=cos)
         albedo *= (self.shading.ambient + self.shading.diffuse * cos)[:, None]
         return albedo
 
