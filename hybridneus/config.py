@@ -103,6 +103,8 @@ class LossConfig:
     n_random_points: int = 1024  # random volume points per step for Eikonal/regularisers
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
     curvature_step: float = 0.01  # finite-difference step of the curvature term (world units)
+    curvature_end: float = 0.0  # 0: constant curvature weight; else it falls to 0 linearly by
+    # this fraction of training
     lambda_rgb: float = 1.0  # squared colour error (only with train.supervision = rgb)
 
 

@@ -147,6 +147,25 @@ def test_curvature_term_sits_on_the_rendered_surface(scene):
     assert "loss/curvature" not in off
 
 
+def test_curvature_weight_falls_linearly_to_zero_by_curvature_end(scene):
+    """loss.curvature_end: 0 keeps the weight; else it falls linearly, and once it reaches 0
+    the step skips the term (and its extra gradient pass) altogether."""
+    const, _ = prepare(scene, tiny("train.iters=20", "loss.lambda_curvature=0.1"), device="cpu")
+    fade, _ = prepare(scene, tiny("train.iters=20", "loss.lambda_curvature=0.1",
+                                  "loss.curvature_end=0.5"), device="cpu")
+    off, _ = prepare(scene, tiny("train.iters=20", "loss.curvature_end=0.5"), device="cpu")
+    weights = []
+    for step in (0, 5, 10, 15):
+        const.step = fade.step = off.step = step
+        weights.append((const.curvature_weight(), fade.curvature_weight(), off.curvature_weight()))
+    assert weights == [(1.0, 1.0, 0.0), (1.0, 0.5, 0.0), (1.0, 0.0, 0.0), (1.0, 0.0, 0.0)]
+    fade.step = 12
+    assert "loss/curvature" not in fade.train_step()
+    fade.step = 4
+    logs = fade.train_step()
+    assert "loss/curvature" in logs and logs["loss/curvature"] > 0
+
+
 def test_curvature_loss_is_zero_for_equal_normals_and_grows_with_their_angle():
     g = torch.nn.functional.normalize(torch.randn(100, 3), dim=-1)
     assert float(L.curvature_loss(g, 3.0 * g)) == pytest.approx(0.0, abs=1e-10)

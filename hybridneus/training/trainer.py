@@ -370,6 +370,18 @@ class Trainer:
             return end
         return d.eps_start * (end / d.eps_start) ** (self.step / d.eps_anneal_steps)
 
+    def curvature_weight(self) -> float:
+        """Multiplier of ``loss.lambda_curvature`` at this step: 1, or with
+        ``loss.curvature_end`` a linear fall to 0 at that fraction of training. Smoothing early
+        keeps surfaces that no event constrains from wrinkling while the shape forms, and
+        letting go later gives the fine detail the events do support back to the data."""
+        lw = self.cfg.loss
+        if lw.lambda_curvature <= 0:
+            return 0.0
+        if lw.curvature_end <= 0:
+            return 1.0
+        return max(0.0, 1.0 - self.step / (lw.curvature_end * self.total_steps))
+
     def _background_matter_on(self) -> bool:
         """The background-matter term waits until the surface and its colours have formed: the
         initial sphere's colour is the untrained head's, and nothing defends it yet."""
@@ -420,10 +432,12 @@ class Trainer:
             or self.free_space is not None
         )
         grads = [out.gradients]
-        if lw.lambda_curvature > 0:
+        curvature = self.curvature_weight()
+        if curvature > 0:
             surface = self._surface_points(out, origins, dirs)
             if surface.shape[0] > 0:
-                terms["curvature"], grad_c = self._curvature(surface)
+                value, grad_c = self._curvature(surface)
+                terms["curvature"] = curvature * value
                 grads.append(grad_c)
         if need_random:
             pts = self._random_points(lw.n_random_points)
