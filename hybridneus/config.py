@@ -88,7 +88,7 @@ class LossConfig:
 
     lambda_event: float = 1.0  # event loss (EventNeRF/EventNeuS, Bayer-masked log difference)
     lambda_eikonal: float = 0.1  # (|grad sdf| - 1)^2 on samples and random volume points
-    lambda_curvature: float = 0.0  # normal variation at the rendered surface points
+    lambda_curvature: float = 0.05  # normal variation at the rendered surface points
     lambda_sparsity: float = 0.0  # exp(-tau |sdf|) on random points in the crop (anti-floater)
     lambda_outside: float = 1.0  # relu(-sdf) at random points outside the crop (no caps there)
     lambda_hull: float = 1.0  # relu(-sdf) at random points the events' visual hull calls empty
@@ -103,7 +103,7 @@ class LossConfig:
     n_random_points: int = 1024  # random volume points per step for Eikonal/regularisers
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
     curvature_step: float = 0.01  # finite-difference step of the curvature term (world units)
-    curvature_end: float = 0.0  # 0: constant curvature weight; else it falls to 0 linearly by
+    curvature_end: float = 0.5  # 0: constant curvature weight; else it falls to 0 linearly by
     # this fraction of training
     lambda_rgb: float = 1.0  # squared colour error (only with train.supervision = rgb)
 
@@ -226,6 +226,7 @@ def _eventneus() -> Config:
     cfg.train.lr_variance = 1e-3
     cfg.train.inv_s_floor = 0.0  # the paper learns s freely
     cfg.loss.lambda_hull = 0.0  # the paper has no silhouette prior
+    cfg.loss.lambda_curvature = 0.0  # nor a smoothness prior
     cfg.train.warmup = 100
     return cfg
 

@@ -143,17 +143,19 @@ def test_curvature_term_sits_on_the_rendered_surface(scene):
         assert float(trainer.field.sdf(points).abs().max()) < 0.05
     logs = trainer.train_step()
     assert "loss/curvature" in logs and np.isfinite(logs["loss/curvature"])
-    off = prepare(scene, tiny("train.iters=1"), device="cpu")[0].train_step()
-    assert "loss/curvature" not in off
+    off = prepare(scene, tiny("train.iters=1", "loss.lambda_curvature=0"), device="cpu")[0]
+    assert "loss/curvature" not in off.train_step()
 
 
 def test_curvature_weight_falls_linearly_to_zero_by_curvature_end(scene):
     """loss.curvature_end: 0 keeps the weight; else it falls linearly, and once it reaches 0
     the step skips the term (and its extra gradient pass) altogether."""
-    const, _ = prepare(scene, tiny("train.iters=20", "loss.lambda_curvature=0.1"), device="cpu")
+    const, _ = prepare(scene, tiny("train.iters=20", "loss.lambda_curvature=0.1",
+                                   "loss.curvature_end=0"), device="cpu")
     fade, _ = prepare(scene, tiny("train.iters=20", "loss.lambda_curvature=0.1",
                                   "loss.curvature_end=0.5"), device="cpu")
-    off, _ = prepare(scene, tiny("train.iters=20", "loss.curvature_end=0.5"), device="cpu")
+    off, _ = prepare(scene, tiny("train.iters=20", "loss.lambda_curvature=0",
+                                 "loss.curvature_end=0.5"), device="cpu")
     weights = []
     for step in (0, 5, 10, 15):
         const.step = fade.step = off.step = step
