@@ -81,11 +81,13 @@ def rgb_loss(color: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return ((color - target) ** 2).sum(dim=-1).mean()
 
 
-def eikonal_loss(gradients: torch.Tensor) -> torch.Tensor:
+def eikonal_loss(gradients: torch.Tensor, weights: torch.Tensor | None = None) -> torch.Tensor:
     """Mean of ``(|grad sdf| - 1)^2`` over points.
 
     Args:
         gradients: (n_points, 3), with a graph for double backward.
+        weights: optional (n_points,) weights of a weighted mean (0 leaves a point out
+            without indexing, which would make a GPU wait for the count).
 
     Returns:
         loss: scalar.
@@ -93,15 +95,26 @@ def eikonal_loss(gradients: torch.Tensor) -> torch.Tensor:
     Note:
         Differentiable (needs the gradient computed with ``create_graph=True``).
     """
-    return ((gradients.norm(dim=-1) - 1.0) ** 2).mean()
+    per_point = (gradients.norm(dim=-1) - 1.0) ** 2
+    return _mean(per_point, weights)
 
 
-def curvature_loss(grad_a: torch.Tensor, grad_b: torch.Tensor) -> torch.Tensor:
+def _mean(values: torch.Tensor, weights: torch.Tensor | None) -> torch.Tensor:
+    """Mean, or weighted mean (0 when every weight is 0)."""
+    if weights is None:
+        return values.mean()
+    return (values * weights).sum() / weights.sum().clamp_min(1e-12)
+
+
+def curvature_loss(
+    grad_a: torch.Tensor, grad_b: torch.Tensor, weights: torch.Tensor | None = None
+) -> torch.Tensor:
     """Mean squared change of unit normals between points and their offset copies.
 
     Args:
         grad_a: SDF gradients at points, (n_points, 3).
         grad_b: SDF gradients at the points shifted by a small random offset, (n_points, 3).
+        weights: optional (n_points,) weights of a weighted mean.
 
     Returns:
         loss: scalar.
@@ -111,7 +124,7 @@ def curvature_loss(grad_a: torch.Tensor, grad_b: torch.Tensor) -> torch.Tensor:
     """
     na = torch.nn.functional.normalize(grad_a, dim=-1)
     nb = torch.nn.functional.normalize(grad_b, dim=-1)
-    return ((na - nb) ** 2).sum(dim=-1).mean()
+    return _mean(((na - nb) ** 2).sum(dim=-1), weights)
 
 
 def outside_loss(sdf: torch.Tensor, outside: torch.Tensor) -> torch.Tensor:

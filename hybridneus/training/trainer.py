@@ -338,15 +338,23 @@ class Trainer:
         return lo + u * (hi - lo)
 
     @staticmethod
-    def _surface_points(out, origins: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-        """The rendered surface points (expected depth) of the rays that hit something."""
-        hit = out.opacity.detach() > 0.5
-        depth = out.depth.detach()[hit] / out.opacity.detach()[hit]
-        return origins[hit] + depth[:, None] * dirs[hit]
+    def _surface_points(
+        out, origins: torch.Tensor, dirs: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The rendered surface point (expected depth) of every ray, and which rays hit
+        something (opacity > 0.5) as a 0/1 weight. Every ray keeps a point, so that no step
+        waits for the number of hits (a GPU would stall on it); a miss's point is the mean of
+        its samples' depths, or its origin where it has no opacity at all."""
+        opacity = out.opacity.detach()
+        depth = out.depth.detach() / opacity.clamp_min(1e-6)
+        return origins + depth[:, None] * dirs, (opacity > 0.5).to(origins.dtype)
 
-    def _curvature(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Normal change over ``loss.curvature_step`` at surface ``points``, and the SDF
-        gradients it evaluated (at the points and their shifted copies, for the Eikonal term).
+    def _curvature(
+        self, points: torch.Tensor, hit: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normal change over ``loss.curvature_step`` at the surface ``points`` with ``hit``
+        1, and the SDF gradients it evaluated (at the points and their shifted copies, for the
+        Eikonal term).
 
         Where the events say nothing (a flat face of one colour is seen only at its outline)
         the data leave the surface free to wrinkle; this prior prefers the smooth one.
@@ -356,7 +364,7 @@ class Trainer:
         shifted = points + lw.curvature_step * torch.nn.functional.normalize(offset, dim=-1)
         _, grad, _ = self.field.sdf_gradient_features(torch.cat([points, shifted]), True)
         grad_p, grad_s = grad.chunk(2)
-        return L.curvature_loss(grad_p, grad_s), grad
+        return L.curvature_loss(grad_p, grad_s, hit), grad
 
     def tonemap_eps(self) -> float:
         """The event loss's eps at this step: ``data.eps_start`` eased geometrically into the
@@ -432,17 +440,20 @@ class Trainer:
             or self.free_space is not None
         )
         grads = [out.gradients]
+        eik_weights = None  # only the hits' curvature points count for the Eikonal term
         curvature = self.curvature_weight()
         if curvature > 0:
-            surface = self._surface_points(out, origins, dirs)
-            if surface.shape[0] > 0:
-                value, grad_c = self._curvature(surface)
-                terms["curvature"] = curvature * value
-                grads.append(grad_c)
+            surface, hit = self._surface_points(out, origins, dirs)
+            value, grad_c = self._curvature(surface, hit)
+            terms["curvature"] = curvature * value
+            grads.append(grad_c)
+            eik_weights = [torch.ones(len(out.gradients), device=self.device), hit, hit]
         if need_random:
             pts = self._random_points(lw.n_random_points)
             sdf_r, grad_r, _ = self.field.sdf_gradient_features(pts, create_graph=True)
             grads.append(grad_r)
+            if eik_weights is not None:
+                eik_weights.append(torch.ones(len(grad_r), device=self.device))
             outside = crop_sdf(pts, self.field.crop) > 0
             if lw.lambda_sparsity > 0:
                 terms["sparsity"] = L.sparsity_loss(sdf_r[~outside], lw.sparsity_tau)
@@ -452,7 +463,9 @@ class Trainer:
             if self.free_space is not None and ramp > 0:
                 terms["hull"] = ramp * L.outside_loss(sdf_r, self.free_space.free(pts) & ~outside)
         if lw.lambda_eikonal > 0:
-            terms["eikonal"] = L.eikonal_loss(torch.cat(grads))
+            terms["eikonal"] = L.eikonal_loss(
+                torch.cat(grads), None if eik_weights is None else torch.cat(eik_weights)
+            )
         total = sum(getattr(lw, f"lambda_{name}") * value for name, value in terms.items())
         self.optimizer.zero_grad(set_to_none=True)
         # Only the trained parameters: the sample points are leaves that require grad (for
