@@ -439,21 +439,19 @@ class Trainer:
             lw.lambda_eikonal > 0 or lw.lambda_sparsity > 0 or lw.lambda_outside > 0
             or self.free_space is not None
         )
-        grads = [out.gradients]
-        eik_weights = None  # only the hits' curvature points count for the Eikonal term
+        # SDF gradients for the Eikonal term, each block with its per-point weights (None: all
+        # count); only the hits' curvature points count.
+        grads: list[tuple[torch.Tensor, torch.Tensor | None]] = [(out.gradients, None)]
         curvature = self.curvature_weight()
         if curvature > 0:
             surface, hit = self._surface_points(out, origins, dirs)
             value, grad_c = self._curvature(surface, hit)
             terms["curvature"] = curvature * value
-            grads.append(grad_c)
-            eik_weights = [torch.ones(len(out.gradients), device=self.device), hit, hit]
+            grads.append((grad_c, torch.cat([hit, hit])))
         if need_random:
             pts = self._random_points(lw.n_random_points)
             sdf_r, grad_r, _ = self.field.sdf_gradient_features(pts, create_graph=True)
-            grads.append(grad_r)
-            if eik_weights is not None:
-                eik_weights.append(torch.ones(len(grad_r), device=self.device))
+            grads.append((grad_r, None))
             outside = crop_sdf(pts, self.field.crop) > 0
             if lw.lambda_sparsity > 0:
                 terms["sparsity"] = L.sparsity_loss(sdf_r[~outside], lw.sparsity_tau)
@@ -463,9 +461,11 @@ class Trainer:
             if self.free_space is not None and ramp > 0:
                 terms["hull"] = ramp * L.outside_loss(sdf_r, self.free_space.free(pts) & ~outside)
         if lw.lambda_eikonal > 0:
-            terms["eikonal"] = L.eikonal_loss(
-                torch.cat(grads), None if eik_weights is None else torch.cat(eik_weights)
-            )
+            weights = None
+            if any(w is not None for _, w in grads):
+                weights = torch.cat([torch.ones(len(g), device=g.device) if w is None else w
+                                     for g, w in grads])
+            terms["eikonal"] = L.eikonal_loss(torch.cat([g for g, _ in grads]), weights)
         total = sum(getattr(lw, f"lambda_{name}") * value for name, value in terms.items())
         self.optimizer.zero_grad(set_to_none=True)
         # Only the trained parameters: the sample points are leaves that require grad (for
