@@ -12,6 +12,7 @@ import typer
 class Spiral(str, Enum):
     seiffert = "seiffert"
     even = "even"
+    circle = "circle"
 
 
 class NoisePreset(str, Enum):
@@ -29,7 +30,10 @@ def simulate(
     revolutions: Annotated[float, typer.Option(help="Turns of the training spiral.")] = 8.0,
     spiral: Annotated[Spiral, typer.Option(
         help="seiffert: constant speed (the paper's; most views near the equator); "
-             "even: constant elevation change per turn.")] = Spiral.seiffert,
+             "even: constant elevation change per turn; circle: constant --elevation "
+             "(a turntable; --revolutions 1 wraps around).")] = Spiral.seiffert,
+    elevation: Annotated[float, typer.Option(
+        help="Elevation in degrees of --spiral circle.")] = 30.0,
     width: Annotated[int, typer.Option(help="Image width in pixels.")] = 346,
     height: Annotated[int, typer.Option(help="Image height in pixels.")] = 260,
     fov: Annotated[float, typer.Option(help="Vertical field of view in degrees.")] = 55.0,
@@ -121,7 +125,8 @@ def simulate(
     try:
         shading = Shading(**looks)
         config = SimulationConfig(
-            n_views=views, revolutions=revolutions, spiral=spiral.value, width=width,
+            n_views=views, revolutions=revolutions, spiral=spiral.value,
+            elevation_deg=elevation, width=width,
             height=height, fov_y_deg=fov, object_radius=object_radius, distortion=(k1, k2),
             supersample=supersample,
             events=EventModel(threshold=threshold, eps=eps, polarity_offset=offset),

@@ -208,6 +208,29 @@ def test_polarity_offset_and_noise_reach_scene_json(tmp_path):
     assert tr["n_positive"] > 1.3 * tr["n_negative"]
 
 
+def test_circle_trajectory_is_a_closed_turntable_loop(tmp_path):
+    """spiral="circle": every training camera at the requested elevation, one turn in equal
+    steps, and a preset that lets the reader's windows wrap around (cyclic)."""
+    from hybridneus.data import load_dataset
+
+    cfg = SimulationConfig(n_views=12, revolutions=1.0, spiral="circle", elevation_deg=20.0,
+                           width=24, height=18, supersample=1, val_views=0, test_views=0)
+    info = simulate_dataset("builtin:device", tmp_path / "turntable", cfg)
+    assert info["preset"]["cyclic"] is True
+    assert info["splits"]["train"]["trajectory_params"]["elevation_deg"] == 20.0
+    centres = load_dataset(tmp_path / "turntable")["train"].c2w[:, :3, 3]
+    radius = np.linalg.norm(centres, axis=1)
+    elevation = np.degrees(np.arcsin(centres[:, 1] / radius))
+    assert np.allclose(elevation, 20.0, atol=1e-4)
+    azimuth = np.unwrap(np.arctan2(centres[:, 2], centres[:, 0]))
+    assert np.allclose(np.abs(np.diff(azimuth)), 2 * np.pi / 12, atol=1e-5)
+    two_turns = replace(cfg, revolutions=2.0)
+    assert simulate_dataset("builtin:device", tmp_path / "twice", two_turns)["preset"][
+        "cyclic"] is False
+    with pytest.raises(ValueError, match="elevation_deg"):
+        replace(cfg, elevation_deg=90.0)
+
+
 def test_failed_run_leaves_no_output(tmp_path):
     out = tmp_path / "never"
     cfg = SimulationConfig(n_views=6, width=16, height=12, val_views=0, test_views=0,
@@ -237,6 +260,13 @@ def test_cli_simulate_builtin_and_errors(tmp_path):
     assert info["trajectory"] == "even" and info["splits"]["train"]["trajectory"] == "even"
     assert info["preset"]["polarity_offset"] == -0.4 and info["noise"]["threshold_sigma"] > 0
     assert set(info["splits"]) == {"train", "test"}
+    loop = _cli("simulate", "builtin:thin", str(tmp_path / "loop"), "--views", "8", "--width",
+                "16", "--height", "12", "--val-views", "0", "--test-views", "0", "--spiral",
+                "circle", "--revolutions", "1", "--elevation", "15", "-q")
+    assert loop.returncode == 0, loop.stderr
+    info = json.loads((tmp_path / "loop" / "scene.json").read_text())
+    assert info["trajectory"] == "circle" and info["preset"]["cyclic"] is True
+    assert info["splits"]["train"]["trajectory_params"]["elevation_deg"] == 15.0
     bad = _cli("simulate", str(tmp_path / "missing.obj"), str(tmp_path / "o"))
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [f"error: {tmp_path / 'missing.obj'}: no such "
@@ -246,7 +276,8 @@ def test_cli_simulate_builtin_and_errors(tmp_path):
     assert neg.returncode == 2 and neg.stderr.startswith("error: ")
     for opt, value, msg in [("--light", "1,2", "--light: expected 3 comma-separated numbers"),
                             ("--background", "1.5", "background must be 3 sRGB values"),
-                            ("--background", "grey", "--background: expected 1 or 3")]:
+                            ("--background", "grey", "--background: expected 1 or 3"),
+                            ("--elevation", "95", "elevation_deg must be in (-90, 90)")]:
         res = _cli("simulate", "builtin:thin", str(tmp_path / "o"), opt, value)
         assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
         assert msg in res.stderr

@@ -56,8 +56,10 @@ class SimulationConfig:
     Attributes:
         n_views: training views along the spiral. Default: 999.
         revolutions: turns of the training spiral. Default: 8.
-        spiral: ``seiffert`` (constant speed, the paper's) or ``even`` (constant elevation
-            change per turn, from the pole to the equator).
+        spiral: ``seiffert`` (constant speed, the paper's), ``even`` (constant elevation
+            change per turn, from the pole to the equator) or ``circle`` (constant
+            ``elevation_deg``, like a turntable capture; one revolution wraps around).
+        elevation_deg: elevation of the ``circle`` trajectory. Default: 30 degrees.
         width, height: image size. Default: 346 x 260 (DAVIS 346).
         fov_y_deg: vertical field of view; ``fx = fy = (height / 2) / tan(fov_y / 2)``,
             ``cx, cy = width / 2, height / 2``. Default: 55 degrees, which fits the object's
@@ -80,6 +82,7 @@ class SimulationConfig:
     n_views: int = 999
     revolutions: float = 8.0
     spiral: str = "seiffert"
+    elevation_deg: float = 30.0
     width: int = 346
     height: int = 260
     fov_y_deg: float = 55.0
@@ -100,8 +103,10 @@ class SimulationConfig:
     def __post_init__(self) -> None:
         if self.n_views < 2:
             raise ValueError(f"n_views must be >= 2, got {self.n_views}")
-        if self.spiral not in ("seiffert", "even"):
-            raise ValueError(f"spiral must be 'seiffert' or 'even', got {self.spiral!r}")
+        if self.spiral not in ("seiffert", "even", "circle"):
+            raise ValueError(f"spiral must be 'seiffert', 'even' or 'circle', got {self.spiral!r}")
+        if not -90.0 < self.elevation_deg < 90.0:
+            raise ValueError(f"elevation_deg must be in (-90, 90), got {self.elevation_deg}")
         if not (0 < self.object_radius < self.camera_radius <= 1.0):
             raise ValueError("need 0 < object_radius < camera_radius <= 1, got "
                              f"{self.object_radius}, {self.camera_radius}")
@@ -132,8 +137,10 @@ def split_trajectories(config: SimulationConfig) -> dict[str, Trajectory]:
     """The trajectory of each split that ``config`` asks for."""
     if config.spiral == "seiffert":
         train = seiffert_spiral(config.n_views, config.revolutions)
-    else:
+    elif config.spiral == "even":
         train = even_spiral(config.n_views, config.revolutions)
+    else:
+        train = circle(config.n_views, config.elevation_deg, config.revolutions)
     out = {"train": train}
     if config.val_views:
         out["validation"] = circle(config.val_views, elevation_deg=30.0, azimuth_offset_deg=15.0)
@@ -359,7 +366,7 @@ def _scene_json(config, source_mesh, scene_name, norm, camera, shading, results,
         "preset": {
             "group": "simulated", "scene": scene_name, "threshold": ev.threshold,
             "polarity_offset": ev.polarity_offset,
-            "max_window": min(50, config.n_views - 1), "cyclic": False,
+            "max_window": min(50, config.n_views - 1), "cyclic": _wraps(config),
             "neg_ratio": 0.1, "tonemap_eps": ev.eps, "crop_r": crop[0],
             "crop_y_min": crop[1], "crop_y_max": crop[2],
             "background": list(shading.background),
@@ -367,6 +374,12 @@ def _scene_json(config, source_mesh, scene_name, norm, camera, shading, results,
         },
         "config": _config_json(config),
     }
+
+
+def _wraps(config: SimulationConfig) -> bool:
+    """Whether the training views close a loop (one turn of a circle): event windows may then
+    wrap around the sequence, as the reference code does for 360-degree captures."""
+    return config.spiral == "circle" and abs(config.revolutions - 1.0) < 1e-9
 
 
 def _config_json(config: SimulationConfig) -> dict:
