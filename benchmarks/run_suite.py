@@ -428,8 +428,10 @@ def _plot_scene(scene: str, runs: list[dict]) -> np.ndarray:
     img = np.full((h, w, 3), 255, np.uint8)
     right = w - legend  # the plot's right edge; the legend lives beyond it
     pts = [(t, cd) for r in runs for t, _, cd in r["curve"] if cd]
-    t1 = max(t for t, _ in pts) * 1.05
-    y0, y1 = np.log10(min(c for _, c in pts)) - 0.05, np.log10(max(c for _, c in pts)) + 0.05
+    # a fit that lost its surface has only the initial sphere's point, at t = 0
+    t1 = max([t for t, _ in pts] + [1.0]) * 1.05
+    cds = [c for _, c in pts] or [0.015]
+    y0, y1 = np.log10(min(cds)) - 0.05, np.log10(max(cds)) + 0.05
 
     def xy(t: float, cd: float) -> tuple[int, int]:
         return (int(pad + t / t1 * (right - 2 * pad)),
@@ -449,7 +451,8 @@ def _plot_scene(scene: str, runs: list[dict]) -> np.ndarray:
         poly = [xy(t, cd) for t, _, cd in r["curve"] if cd]
         for p in poly:
             cv2.circle(img, p, 3, colour, -1, cv2.LINE_AA)
-        cv2.polylines(img, [np.array(poly, np.int32)], False, colour, 1, cv2.LINE_AA)
+        if len(poly) > 1:
+            cv2.polylines(img, [np.array(poly, np.int32)], False, colour, 1, cv2.LINE_AA)
         label = f"{r['preset']} {r['device']} ({r['minutes']:g} min)"
         cv2.putText(img, label, (right - pad + 20, pad + 16 + 16 * k), font, 0.45, colour, 1,
                     cv2.LINE_AA)

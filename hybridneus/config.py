@@ -88,7 +88,7 @@ class LossConfig:
 
     lambda_event: float = 1.0  # event loss (EventNeRF/EventNeuS, Bayer-masked log difference)
     lambda_eikonal: float = 0.1  # (|grad sdf| - 1)^2 on samples and random volume points
-    lambda_curvature: float = 0.0  # normal variation at the rendered surface points
+    lambda_curvature: float = 0.05  # normal variation at the rendered surface points
     lambda_sparsity: float = 0.0  # exp(-tau |sdf|) on random points in the crop (anti-floater)
     lambda_outside: float = 1.0  # relu(-sdf) at random points outside the crop (no caps there)
     lambda_hull: float = 1.0  # relu(-sdf) at random points the events' visual hull calls empty

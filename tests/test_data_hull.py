@@ -127,6 +127,41 @@ def test_silhouettes_of_noisy_events_match_the_clean_ones(scene, tmp_path):
     assert free.free(torch.tensor(shell, dtype=torch.float32)).float().mean() > 0.5
 
 
+def test_a_slow_turntable_pools_its_outlines_over_an_arc(scene, tmp_path):
+    """On a circle of 240 views (1.5 degrees per view) with sensor noise, one window fires
+    a sparse stroke of the outline and the hull carves the object; pooling the windows of
+    the views within ``arc_deg`` restores it. Masks only grow, and a trajectory faster than
+    the arc (the 60-view spiral: 12 degrees per view) keeps its own masks."""
+    from hybridneus.simulate import EventModel, SimulationConfig, simulate_dataset
+    from hybridneus.simulate.events import REALISTIC_NOISE
+
+    cfg = SimulationConfig(n_views=240, revolutions=1.0, spiral="circle", elevation_deg=25.0,
+                           width=64, height=48, supersample=1, val_views=0, test_views=0,
+                           object_radius=0.25, noise=REALISTIC_NOISE,
+                           events=EventModel(threshold=0.1, polarity_offset=-0.4))
+    simulate_dataset("builtin:device", tmp_path / "turntable", cfg)
+    split = load_dataset(tmp_path / "turntable")["train"]
+    mesh = trimesh.load(tmp_path / "turntable" / "gt_mesh.ply", force="mesh")
+    surface = torch.tensor(trimesh.sample.sample_surface(mesh, 3000, seed=0)[0],
+                           dtype=torch.float32)
+    lo, hi = mesh.bounds[0] - 0.2, mesh.bounds[1] + 0.2
+    carved = {}
+    for arc in (0.0, 2.0):
+        views, masks = event_silhouettes(split, step=2, arc_deg=arc)
+        carved[arc] = FreeSpace(event_hull(split, lo, hi, 48, silhouettes=(views, masks)))
+        carved[arc] = float(carved[arc].free(surface).float().mean())
+    assert carved[2.0] < 0.5 * carved[0.0], carved
+    own, pooled = event_silhouettes(split, step=2, arc_deg=0.0), event_silhouettes(split, step=2)
+    common = set(own[0]) & set(pooled[0])
+    assert len(common) > 0.9 * len(own[0])
+    for view in common:
+        mine, wide = own[1][own[0].index(view)], pooled[1][pooled[0].index(view)]
+        assert (wide | mine == wide).all()  # pooling only adds to a view's outline
+    fast = load_dataset(scene)["train"]
+    a, b = event_silhouettes(fast, step=7, arc_deg=0.0), event_silhouettes(fast, step=7)
+    assert a[0] == b[0] and all((x == y).all() for x, y in zip(a[1], b[1], strict=True))
+
+
 def test_silhouettes_are_outlined_once_per_split_and_setting(scene, monkeypatch):
     import hybridneus.data.hull as hull_module
 
@@ -140,14 +175,14 @@ def test_silhouettes_are_outlined_once_per_split_and_setting(scene, monkeypatch)
     # the crop and the hull term both ask for these views: the second asks for nothing new
     event_hull_crop(split, (1.0, -1.0, 1.0), step=7)
     event_free_space(split, -np.ones(3), np.ones(3), resolution=16, step=7)
-    assert calls == [(1, 2, 7, True)]
+    assert calls == [(1, 2, 7, True, 2.0)]
     again = event_silhouettes(split, step=7)
     assert again[0] == first[0] and all(a is b for a, b in zip(again[1], first[1], strict=True))
     with pytest.raises(ValueError):  # a caller cannot spoil the others' masks
         again[1][0][0, 0] = True
     event_silhouettes(split, step=7, denoise=False)
     event_silhouettes(split, step=8)
-    assert calls == [(1, 2, 7, True), (1, 2, 7, False), (1, 2, 8, True)]
+    assert calls == [(1, 2, 7, True, 2.0), (1, 2, 7, False, 2.0), (1, 2, 8, True, 2.0)]
     # another split (its own events) outlines its own views
     event_silhouettes(load_dataset(scene)["train"], step=7)
     assert len(calls) == 4

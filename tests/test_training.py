@@ -105,24 +105,30 @@ def test_training_steps_lower_the_event_loss(scene):
 
 
 def test_short_fit_pulls_the_zero_level_onto_the_true_surface(scene):
-    """|sdf| on the true surface falls well below the initial sphere's within a short fit."""
+    """|sdf| on the true surface falls well below the initial sphere's within a short fit.
+
+    A 400-step fit of 64 rays is bistable: at some seeds the sharpness climbs before the
+    surface arrives and freezes it (benchmarks/short_fit_seeds.py counts them), so the
+    median of three seeds is what must fall; a broken event loss moves none of them.
+    """
     import trimesh
 
     from hybridneus.meshing.convert import load_mesh
 
     gt = load_mesh(scene / "gt_mesh.ply")
     points = trimesh.sample.sample_surface(gt, 4000, seed=0)[0].astype(np.float32)
-    cfg = tiny("train.iters=400", "train.seed=0")
-    trainer, _ = prepare(scene, cfg, device="cpu")
 
-    def surface_error() -> float:
+    def surface_error(field) -> float:
         with torch.no_grad():
-            return float(np.abs(trainer.field.sdf(points)).mean())
+            return float(np.abs(field.sdf(points)).mean())
 
-    before = surface_error()
-    trainer.fit(progress=False)
-    after = surface_error()
-    assert after < 0.5 * before, (before, after)
+    before, after = [], []
+    for seed in range(3):
+        trainer, _ = prepare(scene, tiny("train.iters=400", f"train.seed={seed}"), device="cpu")
+        before.append(surface_error(trainer.field))
+        trainer.fit(progress=False)
+        after.append(surface_error(trainer.field))
+    assert np.median(after) < 0.5 * np.median(before), (before, after)
 
 
 def test_curvature_term_sits_on_the_rendered_surface(scene):
