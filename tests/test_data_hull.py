@@ -147,9 +147,9 @@ def test_a_slow_turntable_pools_its_outlines_over_an_arc(scene, tmp_path):
     lo, hi = mesh.bounds[0] - 0.2, mesh.bounds[1] + 0.2
     carved = {}
     for arc in (0.0, 2.0):
-        views, masks = event_silhouettes(split, step=2, arc_deg=arc)
-        carved[arc] = FreeSpace(event_hull(split, lo, hi, 48, silhouettes=(views, masks)))
-        carved[arc] = float(carved[arc].free(surface).float().mean())
+        silhouettes = event_silhouettes(split, step=2, arc_deg=arc)
+        free = FreeSpace(event_hull(split, lo, hi, 48, silhouettes=silhouettes))
+        carved[arc] = float(free.free(surface).float().mean())
     assert carved[2.0] < 0.5 * carved[0.0], carved
     own, pooled = event_silhouettes(split, step=2, arc_deg=0.0), event_silhouettes(split, step=2)
     common = set(own[0]) & set(pooled[0])

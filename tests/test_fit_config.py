@@ -24,7 +24,7 @@ def test_presets_differ_where_documented():
     assert fast.grid.kind == "hash" and paper.grid.kind == "frequency"
     assert quality.train.iters > fast.train.iters
     assert paper.field.sdf_layers == 8 and paper.field.sdf_skip == [4]
-    # curvature, when switched on, fades by default; the paper's preset never has it
+    # curvature is on and fades by default; the paper's preset never has it
     assert 0 < fast.loss.curvature_end < 1
     assert paper.loss.lambda_curvature == 0 and paper.loss.lambda_hull == 0
     with pytest.raises(ConfigError, match="unknown preset"):
