@@ -128,6 +128,10 @@ class TrainConfig:
     decay_start: float = 0.5  # fraction of training after which the lr decays exponentially
     decay_final: float = 0.1  # lr multiplier reached at the last step
     seed: int = 0  # seeds torch, the ray jitter and the event-window sampler
+    collapse_opacity: float = 0.01  # a window's mean opacity below this: restore (0: off)
+    collapse_window: int = 25  # steps per opacity mean, and between the restorable states
+    collapse_retries: int = 3  # restores before the run goes on empty
+    collapse_lr_factor: float = 0.5  # learning-rate multiplier after each restore
     threads: int = 0  # torch CPU threads (0: leave torch's default)
     log_every: int = 10  # steps between metrics.csv rows / TensorBoard scalars
     preview_every: int = 500  # steps between preview PNGs (0: never)

@@ -401,6 +401,84 @@ def test_resume_from_a_checkpoint_saved_on_another_kind_of_device(scene, tmp_pat
     assert any(not torch.equal(at_3[k], after[k]) for k in at_3)  # it went on training
 
 
+def _empty_after(trainer, steps: int) -> dict[str, torch.Tensor]:
+    """Train ``steps`` steps, then push the SDF up by 5 everywhere (an empty field); return
+    the field as it was after ``steps // 2`` steps."""
+    for _ in range(steps // 2):
+        trainer.train_step()
+    earlier = _params(trainer.field)
+    for _ in range(steps - steps // 2):
+        trainer.train_step()
+    with torch.no_grad():
+        trainer.field.sdf_net.layers[-1].bias[0] += 5.0
+    return earlier
+
+
+def test_an_emptied_field_is_restored_from_two_windows_back(scene, caplog):
+    cfg = tiny("train.iters=200", "train.collapse_window=5", "train.decay_start=1.0")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    earlier = _empty_after(trainer, 10)  # healthy windows end at steps 5 and 10
+    with caplog.at_level("WARNING", logger="hybridneus"):
+        opacity = [trainer.train_step()["opacity"] for _ in range(5)]
+    assert max(opacity) < 0.01  # the push did empty it
+    assert trainer.restores == 1 and trainer.lr_scale == 0.5
+    assert "the field emptied" in caplog.text and "state of step 5" in caplog.text
+    now = _params(trainer.field)
+    for k in earlier:
+        assert torch.equal(now[k], earlier[k]), k
+    assert not trainer.optimizer.state  # fresh moments
+    logs = [trainer.train_step() for _ in range(10)]
+    assert logs[0]["lr"] == pytest.approx(cfg.train.lr * 0.5 / cfg.train.warmup)
+    assert logs[-1]["lr"] == pytest.approx(cfg.train.lr * 0.5)
+    assert np.mean([lg["opacity"] for lg in logs]) > 0.05
+
+
+def test_without_the_guard_an_emptied_field_stays_empty(scene):
+    cfg = tiny("train.iters=200", "train.collapse_window=5", "train.collapse_opacity=0")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    _empty_after(trainer, 10)
+    opacity = [trainer.train_step()["opacity"] for _ in range(15)]
+    assert trainer.restores == 0 and max(opacity[-5:]) < 0.01
+
+
+def test_the_guard_gives_up_after_its_retries(scene):
+    cfg = tiny("train.iters=200", "train.collapse_window=5", "train.collapse_retries=1")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    _empty_after(trainer, 10)
+    for _ in range(5):
+        trainer.train_step()
+    assert trainer.restores == 1
+    for _ in range(10):
+        trainer.train_step()
+    with torch.no_grad():
+        trainer.field.sdf_net.layers[-1].bias[0] += 5.0
+    for _ in range(10):
+        trainer.train_step()
+    assert trainer.restores == 1 and trainer.lr_scale == 0.5
+
+
+def test_a_bad_collapse_lr_factor_is_a_config_error(scene):
+    with pytest.raises(ConfigError, match="train.collapse_lr_factor"):
+        prepare(scene, tiny("train.collapse_lr_factor=0"), device="cpu")
+
+
+def test_resume_keeps_the_guards_learning_rate(scene, tmp_path):
+    cfg = tiny("train.iters=40", "train.collapse_window=5", "train.checkpoint_every=20")
+
+    def empty_at_10(trainer, logs):
+        if trainer.step == 10:
+            with torch.no_grad():
+                trainer.field.sdf_net.layers[-1].bias[0] += 5.0
+
+    first = fit(scene, cfg, [empty_at_10, _stop_at(20)], out=tmp_path, device="cpu")
+    assert first.interrupted
+    state = load_checkpoint(first.run_dir)
+    assert state["guard"] == {"lr_scale": 0.5, "warm_from": 15, "restores": 1}
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    trainer.load_state_dict(state)
+    assert (trainer.lr_scale, trainer.warm_from, trainer.restores) == (0.5, 15, 1)
+
+
 def _stop_at(step: int):
     def callback(trainer, logs):
         if trainer.step == step:

@@ -198,6 +198,13 @@ class Trainer:
             raise ConfigError(
                 f"train.supervision: expected 'events' or 'rgb', got {cfg.train.supervision!r}"
             )
+        if not 0.0 < cfg.train.collapse_lr_factor <= 1.0:
+            from hybridneus.errors import ConfigError
+
+            raise ConfigError(
+                f"train.collapse_lr_factor: expected a value in (0, 1], got "
+                f"{cfg.train.collapse_lr_factor}"
+            )
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
         variance = [self.field.variance]
         others = [q for name, q in self.field.named_parameters() if name != "variance"]
@@ -215,6 +222,13 @@ class Trainer:
         self.interrupted = False
         self.occupied_fraction = 1.0
         self.time_budget = cfg.train.minutes * 60.0 if cfg.train.minutes > 0 else None
+        # The collapse guard (see _guard_collapse): learning-rate multiplier, step of the last
+        # restore (its warm-up restarts there), restores so far, and the recent states.
+        self.lr_scale = 1.0
+        self.warm_from = 0
+        self.restores = 0
+        self._window_opacity: list[float] = []
+        self._snapshots: list[tuple[int, dict[str, torch.Tensor]]] = [(0, self._field_copy())]
 
     # ------------------------------------------------------------------ state
 
@@ -236,6 +250,8 @@ class Trainer:
             else _to_primitive(self.frames.rng.bit_generator.state),
             "scene": dict(self.scene),
             "config": self.cfg.to_dict(),
+            "guard": {"lr_scale": self.lr_scale, "warm_from": self.warm_from,
+                      "restores": self.restores},
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -263,6 +279,12 @@ class Trainer:
         self.step = int(state["step"])
         self.total_steps = int(state["total_steps"])
         self.elapsed = float(state.get("elapsed", 0.0))
+        guard = state.get("guard", {})
+        self.lr_scale = float(guard.get("lr_scale", 1.0))
+        self.warm_from = int(guard.get("warm_from", 0))
+        self.restores = int(guard.get("restores", 0))
+        self._window_opacity = []
+        self._snapshots = [(self.step, self._field_copy())]
         self.field.update_step(self.step, self.total_steps)
 
     # ------------------------------------------------------------------ one step
@@ -270,6 +292,8 @@ class Trainer:
     def _schedules(self) -> float:
         t = self.cfg.train
         factor = lr_factor(self.step, self.total_steps, t.warmup, t.decay_start, t.decay_final)
+        if self.restores:
+            factor *= self.lr_scale * onset_weight(self.step, self.warm_from, t.warmup)
         for group, base in zip(self.optimizer.param_groups, self.base_lrs, strict=True):
             group["lr"] = base * factor
         self.field.update_step(self.step, self.total_steps)
@@ -404,7 +428,8 @@ class Trainer:
         t_start = time.perf_counter()
         factor = self._schedules()
         r = cfg.render
-        if r.occupancy and self.step % max(r.occupancy_every, 1) == 0:
+        refresh = self.step % max(r.occupancy_every, 1) == 0 or self.step == self.warm_from
+        if r.occupancy and refresh:
             self.occupied_fraction = self.occupancy.update(
                 self.field.raw_sdf, float(self.field.inv_s().detach()), r.occupancy_band, r.chunk
             )
@@ -484,6 +509,8 @@ class Trainer:
         # device. The copy also ends the step's GPU work, so step_seconds counts it.
         values = torch.stack([v.detach().float().reshape(()) for v in scalars.values()])
         logs = dict(zip(scalars, values.tolist(), strict=True))
+        self._guard_collapse(logs["opacity"])
+        logs["restores"] = float(self.restores)
         seconds = time.perf_counter() - t_start
         self.elapsed += seconds
         logs.update(
@@ -495,6 +522,51 @@ class Trainer:
             }
         )
         return logs
+
+    def _field_copy(self) -> dict[str, torch.Tensor]:
+        return {k: v.detach().clone() for k, v in self.field.state_dict().items()}
+
+    def _guard_collapse(self, opacity: float) -> None:
+        """Bring back an earlier state when the field empties.
+
+        Early in a fit the surface can overshoot: grown until nearly every ray is opaque, it
+        is pushed back by the hull and crop terms, Adam's momentum carries it on, and within
+        ten steps the SDF is positive on every sample (seen on small objects on a turntable,
+        at half of the seeds). Nothing then has a gradient: an empty field renders the
+        background at both ends of every window, and the occupancy grid stops sampling. The
+        guard averages the rendered opacity over ``train.collapse_window`` steps; when that
+        mean falls below ``train.collapse_opacity`` it loads the field saved two windows
+        earlier (the one saved a window earlier may already be on its way out), clears the
+        optimiser's moments, scales the learning rate by ``train.collapse_lr_factor`` and
+        warms it up again. The batches after the restore are new draws, so the run does not
+        replay its collapse. After ``train.collapse_retries`` restores it lets the run go on.
+        """
+        t = self.cfg.train
+        if t.collapse_opacity <= 0 or t.collapse_window <= 0:
+            return
+        self._window_opacity.append(opacity)
+        if len(self._window_opacity) < t.collapse_window:
+            return
+        mean = sum(self._window_opacity) / len(self._window_opacity)
+        self._window_opacity = []
+        if mean >= t.collapse_opacity:
+            self._snapshots = [self._snapshots[-1], (self.step, self._field_copy())]
+            return
+        if self.restores >= t.collapse_retries:
+            return
+        back_to, state = self._snapshots[0]
+        self.field.load_state_dict(state)
+        self.optimizer.state.clear()
+        self.restores += 1
+        self.lr_scale *= t.collapse_lr_factor
+        self.warm_from = self.step
+        self._snapshots = [(back_to, state)]
+        logging.getLogger("hybridneus").warning(
+            "step %d: the field emptied (mean opacity %.4f over %d steps); restored its state "
+            "of step %d with the learning rate x%g (restore %d of at most %d)",
+            self.step, mean, t.collapse_window, back_to, self.lr_scale, self.restores,
+            t.collapse_retries,
+        )
 
     def _maybe_reestimate(self, start_wall: float, start_step: int) -> None:
         if self.time_budget is None:
