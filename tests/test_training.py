@@ -401,16 +401,21 @@ def test_resume_from_a_checkpoint_saved_on_another_kind_of_device(scene, tmp_pat
     assert any(not torch.equal(at_3[k], after[k]) for k in at_3)  # it went on training
 
 
+def _empty(field) -> None:
+    """Push the SDF up by 5 everywhere: nothing is left on any ray."""
+    with torch.no_grad():
+        field.sdf_net.layers[-1].bias[0] += 5.0
+
+
 def _empty_after(trainer, steps: int) -> dict[str, torch.Tensor]:
-    """Train ``steps`` steps, then push the SDF up by 5 everywhere (an empty field); return
-    the field as it was after ``steps // 2`` steps."""
+    """Train ``steps`` steps, then :func:`_empty` the field; return the field as it was
+    after ``steps // 2`` steps."""
     for _ in range(steps // 2):
         trainer.train_step()
     earlier = _params(trainer.field)
     for _ in range(steps - steps // 2):
         trainer.train_step()
-    with torch.no_grad():
-        trainer.field.sdf_net.layers[-1].bias[0] += 5.0
+    _empty(trainer.field)
     return earlier
 
 
@@ -450,8 +455,7 @@ def test_the_guard_gives_up_after_its_retries(scene):
     assert trainer.restores == 1
     for _ in range(10):
         trainer.train_step()
-    with torch.no_grad():
-        trainer.field.sdf_net.layers[-1].bias[0] += 5.0
+    _empty(trainer.field)
     for _ in range(10):
         trainer.train_step()
     assert trainer.restores == 1 and trainer.lr_scale == 0.5
@@ -467,8 +471,7 @@ def test_resume_keeps_the_guards_learning_rate(scene, tmp_path):
 
     def empty_at_10(trainer, logs):
         if trainer.step == 10:
-            with torch.no_grad():
-                trainer.field.sdf_net.layers[-1].bias[0] += 5.0
+            _empty(trainer.field)
 
     first = fit(scene, cfg, [empty_at_10, _stop_at(20)], out=tmp_path, device="cpu")
     assert first.interrupted
