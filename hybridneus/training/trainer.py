@@ -19,6 +19,7 @@ import torch
 
 from hybridneus.config import Config, rays_per_step
 from hybridneus.data.hull import NOTHING_OUTLINED, FreeSpace, event_free_space
+from hybridneus.errors import ConfigError
 from hybridneus.model.field import HybridField, crop_aabb, crop_sdf
 from hybridneus.rendering.occupancy import OccupancyGrid
 from hybridneus.rendering.renderer import render_rays
@@ -133,6 +134,16 @@ class Trainer:
 
         self.cfg = cfg
         self.device = torch.device(device)
+        # Checked before the hull and the samplers are built: a typo should not cost that.
+        if cfg.train.supervision not in ("events", "rgb"):
+            raise ConfigError(
+                f"train.supervision: expected 'events' or 'rgb', got {cfg.train.supervision!r}"
+            )
+        if not 0.0 < cfg.train.collapse_lr_factor <= 1.0:
+            raise ConfigError(
+                f"train.collapse_lr_factor: expected a value in (0, 1], got "
+                f"{cfg.train.collapse_lr_factor}"
+            )
         n_rays = rays_per_step(cfg, self.device)
         if n_rays != cfg.train.n_rays:  # 0: the device's default; config.yaml records it
             cfg.train.n_rays = n_rays
@@ -142,8 +153,6 @@ class Trainer:
             )
         self.dataset = dataset
         if cfg.data.split not in dataset.splits:
-            from hybridneus.errors import ConfigError
-
             raise ConfigError(
                 f"data.split: {dataset.root} has no split {cfg.data.split!r}; "
                 f"found {sorted(dataset.splits)}"
@@ -191,19 +200,6 @@ class Trainer:
             self.frames = FrameRaySampler(
                 self.split, self.preset.width, self.preset.height, seed=cfg.train.seed,
                 device=self.device,
-            )
-        elif cfg.train.supervision != "events":
-            from hybridneus.errors import ConfigError
-
-            raise ConfigError(
-                f"train.supervision: expected 'events' or 'rgb', got {cfg.train.supervision!r}"
-            )
-        if not 0.0 < cfg.train.collapse_lr_factor <= 1.0:
-            from hybridneus.errors import ConfigError
-
-            raise ConfigError(
-                f"train.collapse_lr_factor: expected a value in (0, 1], got "
-                f"{cfg.train.collapse_lr_factor}"
             )
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
         variance = [self.field.variance]
