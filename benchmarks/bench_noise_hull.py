@@ -34,8 +34,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 
-def with_noise(split, rate: float, hot: float, hot_rate: float, seed: int = 0):
-    """``split`` with background activity and hot pixels added to its events."""
+def with_noise(split, rate: float, hot: float, hot_rate: float, seed: int = 0,
+               flags: bool = False):
+    """``split`` with background activity and hot pixels added to its events (and, with
+    ``flags``, a bool array over the new stream that marks the added events)."""
     from hybridneus.data.events import EventStream
 
     ev, rng = split.events, np.random.default_rng(seed)
@@ -54,7 +56,26 @@ def with_noise(split, rate: float, hot: float, hot_rate: float, seed: int = 0):
     y = np.r_[ev.y, (pix // w).astype(ev.y.dtype)]
     t, p = np.r_[ev.t, t], np.r_[ev.p, p]
     order = np.argsort(t, kind="stable")
-    return dataclasses.replace(split, events=EventStream(x[order], y[order], t[order], p[order]))
+    noisy = dataclasses.replace(split, events=EventStream(x[order], y[order], t[order], p[order],
+                                                          t_end=ev.t_max))
+    if not flags:
+        return noisy
+    return noisy, (np.arange(t.size) >= len(ev))[order]
+
+
+def add_noise_args(ap: argparse.ArgumentParser) -> None:
+    """The datasets and the noise levels to add to them, as both noise benchmarks take them."""
+    ap.add_argument("datasets", nargs="+", type=Path, help="clean simulated datasets")
+    ap.add_argument("--rates", nargs="+", type=float, default=[0.0, 0.002, 0.005, 0.02],
+                    help="background events per pixel per frame interval")
+    ap.add_argument("--hot", type=float, default=1e-4, help="share of hot pixels (0 at rate 0)")
+    ap.add_argument("--hot-rate", type=float, default=0.5, help="events per hot pixel per frame")
+
+
+def git_commit() -> str:
+    """The checkout's short commit, for the result lines."""
+    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
+                          capture_output=True, text=True).stdout.strip()
 
 
 def measure(split, clean: dict, lo, hi, surface, args, denoise: bool) -> dict:
@@ -86,11 +107,7 @@ def measure(split, clean: dict, lo, hi, surface, args, denoise: bool) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("datasets", nargs="+", type=Path, help="clean simulated datasets")
-    ap.add_argument("--rates", nargs="+", type=float, default=[0.0, 0.002, 0.005, 0.02],
-                    help="background events per pixel per frame interval")
-    ap.add_argument("--hot", type=float, default=1e-4, help="share of hot pixels (0 at rate 0)")
-    ap.add_argument("--hot-rate", type=float, default=0.5, help="events per hot pixel per frame")
+    add_noise_args(ap)
     ap.add_argument("--hull-res", type=int, default=96, help="hull grid points, longest side")
     ap.add_argument("--out", type=Path,
                     default=REPO / "benchmarks" / "results" / "noise_hull.jsonl")
@@ -102,8 +119,7 @@ def main() -> None:
     from hybridneus.data import load_dataset
     from hybridneus.data.hull import event_silhouettes, hull_view_step
 
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
-                            capture_output=True, text=True).stdout.strip()
+    commit = git_commit()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     for folder in args.datasets:
         ds = load_dataset(folder)

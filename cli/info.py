@@ -74,9 +74,16 @@ def info(
     if "train" in ds.splits:
         from hybridneus.config import DataConfig
         from hybridneus.data.contrast import event_extent, loss_eps
+        from hybridneus.data.denoise import denoised_split
 
-        eps_max = DataConfig().eps_max
-        eps, why = loss_eps(p.tonemap_eps, event_extent(ds.splits["train"], p), eps_max)
+        defaults = DataConfig()
+        filtered, report = denoised_split(ds.splits["train"], defaults.denoise_slab)
+        state = "on" if defaults.denoise else "off"
+        console.print(f"noise: {report.line()} (data.denoise, {state} by default)",
+                      markup=False, highlight=False)
+        # what a fit with the defaults takes
+        train = filtered if defaults.denoise else ds.splits["train"]
+        eps, why = loss_eps(p.tonemap_eps, event_extent(train, p), defaults.eps_max)
         console.print(f"fit: tonemap eps {eps:g}, {why} (data.eps_from_events)",
                       markup=False, highlight=False)
     for s in ds.splits.values():

@@ -34,6 +34,9 @@ def _resolve_config(config: Config | str | None, overrides: Sequence[str]) -> Co
 def load_training_data(cfg: Config, dataset: Any = None):
     """Load ``dataset`` (path or EventDataset) with the config's preset overrides.
 
+    With ``data.denoise``, events that no nearby pixel confirms are taken for sensor noise and
+    left out of the training split (:mod:`hybridneus.data.denoise`); everything after, the
+    crop and the tonemap eps included, sees the kept events.
     With ``data.crop_from_events`` and no crop set in the config, the preset's crop is shrunk
     to the events' visual hull (:func:`hybridneus.data.hull.event_hull_crop`); the crop taken
     (shrunk or kept) is written into ``cfg.data``, so the run's config records it and a
@@ -58,11 +61,35 @@ def load_training_data(cfg: Config, dataset: Any = None):
         dataset = load_dataset(
             path, overrides=cfg.data.overrides() or None, splits=cfg.data.split
         )
+    if cfg.data.denoise:
+        dataset = _denoise(cfg, dataset)
     crop_keys = ("crop_r", "crop_y_min", "crop_y_max")
     if cfg.data.crop_from_events and all(getattr(cfg.data, k) is None for k in crop_keys):
         dataset = _crop_from_events(cfg, dataset, crop_keys)
     if cfg.data.eps_from_events and cfg.data.tonemap_eps is None:
         dataset = _eps_from_events(cfg, dataset)
+    return dataset
+
+
+def _denoise(cfg: Config, dataset: Any) -> Any:
+    """``dataset`` (a copy, when anything goes) with the training split's noise events
+    removed (:func:`hybridneus.data.denoise.denoised_split`)."""
+    import copy
+    import logging
+
+    from hybridneus.data.denoise import denoised_split
+
+    if not cfg.data.denoise_slab > 0:
+        raise ConfigError(f"data.denoise_slab: expected a number of views > 0, got "
+                          f"{cfg.data.denoise_slab}")
+    split, report = denoised_split(dataset[cfg.data.split], cfg.data.denoise_slab)
+    msg = f"{report.line()} (data.denoise)"
+    logging.getLogger("hybridneus").info(msg)
+    if split is dataset[cfg.data.split]:
+        return dataset
+    dataset = copy.copy(dataset)
+    dataset.splits = {**dataset.splits, cfg.data.split: split}
+    dataset.notes = [*dataset.notes, msg]
     return dataset
 
 

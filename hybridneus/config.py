@@ -156,6 +156,8 @@ class DataConfig:
     crop_y_min: float | None = None  # crop-cylinder bottom
     crop_y_max: float | None = None  # crop-cylinder top
     background: list[float] | None = None  # RGB in [0, 1] behind the object
+    denoise: bool = False  # targets from the events that nearby pixels confirm (see docs)
+    denoise_slab: float = 2.0  # denoise: time slab, in views, within which company counts
     crop_from_events: bool = True  # shrink the crop to the events' visual hull (if no crop set)
     eps_from_events: bool = True  # cap tonemap_eps (eps_max, and what the events' changes need)
     eps_max: float = 1e-3  # eps_from_events: the largest tonemap eps the loss uses
@@ -164,8 +166,8 @@ class DataConfig:
 
     def overrides(self) -> dict[str, Any]:
         """The preset overrides that are set, as ``{name: value}`` for the data module."""
-        skip = {"path", "split", "crop_from_events", "eps_from_events", "eps_max", "eps_start",
-                "eps_anneal_steps"}
+        skip = {"path", "split", "denoise", "denoise_slab", "crop_from_events", "eps_from_events",
+                "eps_max", "eps_start", "eps_anneal_steps"}
         out = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)

@@ -37,6 +37,8 @@ def test_info_table(run_cli, scene):
     assert "0/1 (converted to -1/+1)" in out
     # the real group's eps (1e-5) is below the cap, and random events ask for little
     assert "fit: tonemap eps 1e-05, the preset's" in out
+    # 400 events spread over 24x16 pixels: noise, and too dense to filter
+    assert "noise: events: the noise is too dense" in out and "(data.denoise, off" in out
 
 
 def test_info_override_and_split(run_cli, scene):

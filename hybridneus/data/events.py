@@ -34,6 +34,10 @@ class EventStream:
         p: (n_events,) int8, polarity in {-1, +1} (0/1 files are converted on load).
         path: the npz file.
         polarity_note: how polarity was stored, e.g. ``"0/1 (converted to -1/+1)"``.
+        t_end: the capture's last timestamp when it is not the last event's (a filtered
+            stream keeps its views where the file put them); ``None``: ``t[-1]``.
+        unfiltered: the stream this one was filtered from (:mod:`hybridneus.data.denoise`),
+            or ``None``.
     """
 
     x: np.ndarray
@@ -42,6 +46,8 @@ class EventStream:
     p: np.ndarray
     path: Path | None = None
     polarity_note: str = "-1/+1"
+    t_end: float | None = None
+    unfiltered: EventStream | None = field(default=None, repr=False)
     _pixel_code: np.ndarray | None = field(default=None, repr=False)
     _code_width: int = field(default=0, repr=False)
     # Derived structures built on first use (e.g. the window counter of data.windows).
@@ -53,6 +59,8 @@ class EventStream:
     @property
     def t_max(self) -> float:
         """Largest timestamp: view i of N sits at ``i / (N - 1) * t_max``."""
+        if self.t_end is not None:
+            return float(self.t_end)
         return float(self.t[-1]) if len(self) else 0.0
 
     @property

@@ -18,6 +18,7 @@ for long slices, from cumulative count images stored every ``M`` events plus two
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, fields
 from typing import Literal
 
@@ -99,10 +100,11 @@ def event_counter(split: SplitData) -> EventCounter:
     return counter
 
 
-def _index_ranges(t: np.ndarray, t0: float, t1: float) -> list[tuple[int, int]]:
-    """Index ranges of events in ``[t0, t1)``; ``t0 < 0`` also takes ``[t0 + T, end]``."""
+def _index_ranges(
+    t: np.ndarray, t0: float, t1: float, t_max: float
+) -> list[tuple[int, int]]:
+    """Index ranges of events in ``[t0, t1)``; ``t0 < 0`` also takes ``[t0 + t_max, end]``."""
     if t0 < 0:
-        t_max = float(t[-1])
         start = int(np.searchsorted(t, t0 + t_max, side="left"))
         return [(start, t.shape[0]), (0, int(np.searchsorted(t, t1, side="left")))]
     return [(int(np.searchsorted(t, t0, side="left")), int(np.searchsorted(t, t1, side="left")))]
@@ -128,7 +130,7 @@ def event_frame(
         raise ValueError(f"event_frame: t0={t0} is more than one loop (T={split.t_max}) back")
     counter = event_counter(split)
     c = None
-    for i0, i1 in _index_ranges(split.events.t, t0, t1):
+    for i0, i1 in _index_ranges(split.events.t, t0, t1, split.t_max):
         part = counter.counts(i0, i1)
         c = part if c is None else c + part
     frame = c[:, 1] * (1.0 + polarity_offset) + c[:, 0] * (polarity_offset - 1.0)
@@ -234,6 +236,10 @@ class EventWindowSampler:
         self.per_load_len = self.rng.integers(1, preset.max_window + 1, size=self.n_views)
         first = 0 if preset.cyclic else 1
         self.views = np.arange(first, self.n_views)
+        # A filtered stream's removed events (sensor noise) are no brightness change, but
+        # rays still go where they fired: there the field learns that nothing changes.
+        raw = split.events.unfiltered
+        self._fired = None if raw is None else dataclasses.replace(split, events=raw)
 
     def draw_window(self) -> tuple[int, float, float]:
         """Pick a view and a window: ``(view1, t0, t1)`` (``t0 < 0`` means it wraps)."""
@@ -260,10 +266,13 @@ class EventWindowSampler:
         c2w = interpolate_pose(self.split.c2w[a], self.split.c2w[b], w)
         return c2w, int(round(s))
 
-    def pick_pixels(self, frame: np.ndarray, n_rays: int) -> np.ndarray:
-        """(n_rays, 2) int64 pixels (column, row): ``1 - neg_ratio`` of them from E != 0."""
+    def pick_pixels(
+        self, frame: np.ndarray, n_rays: int, fired: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(n_rays, 2) int64 pixels (column, row): ``1 - neg_ratio`` of them from E != 0
+        (or from where ``fired`` is nonzero, when given)."""
         h, w = frame.shape
-        active = np.flatnonzero(frame.reshape(-1))
+        active = np.flatnonzero((frame if fired is None else fired).reshape(-1))
         n_pos = int(round((1.0 - self.preset.neg_ratio) * n_rays)) if active.size else 0
         idx = np.empty(n_rays, dtype=np.int64)
         idx[:n_pos] = active[self.rng.integers(0, active.size, size=n_pos)]
@@ -278,7 +287,9 @@ class EventWindowSampler:
         """
         i, t0, t1 = self.draw_window()
         frame = self.frame(t0, t1)
-        xy = self.pick_pixels(frame, n_rays)
+        fired = None if self._fired is None else event_frame(
+            self._fired, t0, t1, self.preset.polarity_offset)
+        xy = self.pick_pixels(frame, n_rays, fired)
         t0_wrapped = t0 + self.t_max if t0 < 0 else t0
         c2w0, k0 = self.pose_at(t0_wrapped)
         sp = self.split
