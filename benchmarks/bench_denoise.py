@@ -59,7 +59,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from hybridneus.data import EventWindowSampler, load_dataset
-    from hybridneus.data.denoise import signal_events
+    from hybridneus.data.denoise import kept_events, signal_events
 
     commit = git_commit()
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -82,9 +82,7 @@ def main() -> None:
             slab = args.slab * noisy.t_max / (noisy.n_views - 1)
             keep, found = signal_events(ev, noisy.width, noisy.height, slab)
             seconds = time.perf_counter() - start
-            kept = dataclasses.replace(noisy, events=dataclasses.replace(
-                ev, x=ev.x[keep], y=ev.y[keep], t=ev.t[keep], p=ev.p[keep], t_end=ev.t_max,
-                cache={}, _pixel_code=None))
+            kept = dataclasses.replace(noisy, events=kept_events(ev, keep))
             raw_px, raw_share = window_noise(split, noisy, windows, preset.polarity_offset)
             px, share = window_noise(split, kept, windows, preset.polarity_offset)
             row = {"dataset": folder.name, "rate": rate, "hot": hot, "hot_rate": args.hot_rate,

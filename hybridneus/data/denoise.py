@@ -62,16 +62,26 @@ def event_company(
         Memory stays near ``_CHUNK_CELLS`` float32 cells whatever the stream's length: slabs
         are counted a chunk at a time, each chunk with one slab of margin either side.
     """
-    import cv2
+    if len(events) == 0:
+        return np.zeros(0, dtype=np.int32)
+    return _company(events, width, height, _slabs(events, dt), radius)
 
-    n = len(events)
-    company = np.zeros(n, dtype=np.int32)
-    if n == 0:
-        return company
+
+def _slabs(events: EventStream, dt: float) -> np.ndarray:
+    """(n_events,) int64 slab index of each event of a non-empty stream."""
     if not dt > 0:
         raise ValueError(f"event_company: dt must be > 0, got {dt}")
+    return np.floor((events.t - events.t[0]) / dt).astype(np.int64)
+
+
+def _company(
+    events: EventStream, width: int, height: int, slab: np.ndarray, radius: int
+) -> np.ndarray:
+    """:func:`event_company` of a non-empty stream, given its events' slabs."""
+    import cv2
+
+    company = np.zeros(len(events), dtype=np.int32)
     pixels = width * height
-    slab = np.floor((events.t - events.t[0]) / dt).astype(np.int64)
     n_slabs = int(slab[-1]) + 1
     per_chunk = max(1, _CHUNK_CELLS // pixels - 2)
     side = 2 * radius + 1
@@ -157,11 +167,11 @@ def signal_events(
     the bar. ``dt``: slab length in the stream's time unit (> 0)."""
     import cv2
 
-    company = event_company(events, width, height, dt)
-    if company.size == 0:
+    if len(events) == 0:
         return np.ones(0, bool), CompanyBar(0, 0.0, 0.0)
+    slab = _slabs(events, dt)
+    company = _company(events, width, height, slab, RADIUS)
     pixels = width * height
-    slab = np.floor((events.t - events.t[0]) / dt).astype(np.int64)
     n_slabs = int(slab[-1]) + 1
     # Noise dense enough that no event is alone looks clean to the count of lone events.
     # Noise fires everywhere alike, an object in a part of the image: where the quietest
@@ -224,6 +234,12 @@ def denoised_split(split: SplitData, slab_views: float = 2.0) -> tuple[SplitData
     report = DenoiseReport(found.bar, found.noise_rate, found.noise_share, kept, total)
     if kept == total:
         return split, report
-    events = EventStream(ev.x[keep], ev.y[keep], ev.t[keep], ev.p[keep], path=ev.path,
-                         polarity_note=ev.polarity_note, t_end=ev.t_max, unfiltered=ev)
-    return dataclasses.replace(split, events=events), report
+    return dataclasses.replace(split, events=kept_events(ev, keep)), report
+
+
+def kept_events(events: EventStream, keep: np.ndarray) -> EventStream:
+    """The events where ``keep`` is True, as a stream whose views stay where the file put
+    them (``t_end``) and that knows what it was filtered from (``unfiltered``)."""
+    return EventStream(events.x[keep], events.y[keep], events.t[keep], events.p[keep],
+                       path=events.path, polarity_note=events.polarity_note,
+                       t_end=events.t_max, unfiltered=events)
