@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -73,6 +74,7 @@ def info(
     console.print(f"preset source: {ds.preset_source}", markup=False, highlight=False)
     if "train" in ds.splits:
         from hybridneus.config import DataConfig
+        from hybridneus.data.balance import polarity_balance
         from hybridneus.data.contrast import event_extent, loss_eps
         from hybridneus.data.denoise import denoised_split
 
@@ -81,8 +83,16 @@ def info(
         state = "on" if defaults.denoise else "off"
         console.print(f"noise: {report.line()} (data.denoise, {state} by default)",
                       markup=False, highlight=False)
+        balance = polarity_balance(ds.splits["train"], defaults.denoise_slab,
+                                   (filtered, report))
+        console.print(f"{balance.line()}; {_offset_use(ds, balance)}", markup=False,
+                      highlight=False)
         # what a fit with the defaults takes
         train = filtered if defaults.denoise else ds.splits["train"]
+        offset = balance.suggested()
+        estimated = defaults.offset_from_events and "polarity_offset" not in ds.stated
+        if estimated and offset is not None:
+            p = replace(p, polarity_offset=offset)
         eps, why = loss_eps(p.tonemap_eps, event_extent(train, p), defaults.eps_max)
         console.print(f"fit: tonemap eps {eps:g}, {why} (data.eps_from_events)",
                       markup=False, highlight=False)
@@ -97,3 +107,18 @@ def info(
         if "polarity stored as" in note:  # already shown per split above
             continue
         console.print(f"note: {note}", markup=False, highlight=False)
+
+
+def _offset_use(ds, balance) -> str:
+    """What a fit with the defaults does with the estimate ``balance``."""
+    from hybridneus.data.balance import DISAGREE
+
+    offset, stated = balance.suggested(), ds.preset.polarity_offset
+    if "polarity_offset" not in ds.stated:
+        if offset is None:
+            return f"a fit keeps the preset's {stated:g}"
+        return f"a fit uses {offset:g} (data.offset_from_events)"
+    if offset is not None and abs(offset - stated) > DISAGREE:
+        return (f"the preset's {stated:g} disagrees: --set data.polarity_offset={offset:g} "
+                "uses the events'")
+    return f"a fit keeps the preset's {stated:g}"

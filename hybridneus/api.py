@@ -34,6 +34,10 @@ def _resolve_config(config: Config | str | None, overrides: Sequence[str]) -> Co
 def load_training_data(cfg: Config, dataset: Any = None):
     """Load ``dataset`` (path or EventDataset) with the config's preset overrides.
 
+    With ``data.offset_from_events`` and no polarity offset stated by the path, ``scene.json``
+    or the config, the offset is the one the events' own balance implies
+    (:mod:`hybridneus.data.balance`) instead of the fallback's 0; a stated offset that the
+    events contradict gets a warning. The offset taken is written into ``cfg.data``.
     With ``data.denoise``, events that no nearby pixel confirms are taken for sensor noise and
     left out of the training split (:mod:`hybridneus.data.denoise`); everything after, the
     crop and the tonemap eps included, sees the kept events.
@@ -61,6 +65,8 @@ def load_training_data(cfg: Config, dataset: Any = None):
         dataset = load_dataset(
             path, overrides=cfg.data.overrides() or None, splits=cfg.data.split
         )
+    if cfg.data.offset_from_events and cfg.data.polarity_offset is None:
+        dataset = _offset_from_events(cfg, dataset)
     if cfg.data.denoise:
         dataset = _denoise(cfg, dataset)
     crop_keys = ("crop_r", "crop_y_min", "crop_y_max")
@@ -68,6 +74,45 @@ def load_training_data(cfg: Config, dataset: Any = None):
         dataset = _crop_from_events(cfg, dataset, crop_keys)
     if cfg.data.eps_from_events and cfg.data.tonemap_eps is None:
         dataset = _eps_from_events(cfg, dataset)
+    return dataset
+
+
+def _offset_from_events(cfg: Config, dataset: Any) -> Any:
+    """``dataset`` (a copy, when the offset changes) with the polarity offset its events imply
+    (:func:`hybridneus.data.balance.polarity_balance`), if nothing stated one; a stated offset
+    is kept, with a warning when the events disagree with it by more than ``DISAGREE``."""
+    import copy
+    import logging
+
+    from hybridneus.data import apply_overrides as preset_overrides
+    from hybridneus.data.balance import DISAGREE, polarity_balance
+
+    log = logging.getLogger("hybridneus")
+    p = dataset.preset
+    balance = polarity_balance(dataset[cfg.data.split])
+    log.info(balance.line())
+    suggested = balance.suggested()
+    if suggested is None:
+        return dataset
+    if "polarity_offset" in dataset.stated:
+        if abs(suggested - p.polarity_offset) > DISAGREE:
+            msg = (f"polarity offset {p.polarity_offset:g} (preset from the "
+                   f"{dataset.preset_source}), but the events imply {suggested:g}; --set "
+                   f"data.polarity_offset={suggested:g} uses theirs")
+            log.warning(msg)
+            dataset = copy.copy(dataset)
+            dataset.notes = [*dataset.notes, msg]
+        return dataset
+    cfg.data.polarity_offset = suggested
+    if suggested == p.polarity_offset:
+        return dataset
+    msg = (f"polarity offset {suggested:g} from the events' balance (the preset from the "
+           f"{dataset.preset_source} guessed {p.polarity_offset:g}; "
+           "data.offset_from_events=false keeps the guess)")
+    log.info(msg)
+    dataset = copy.copy(dataset)
+    dataset.preset = preset_overrides(p, {"polarity_offset": suggested})
+    dataset.notes = [*dataset.notes, msg]
     return dataset
 
 

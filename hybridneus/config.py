@@ -159,6 +159,7 @@ class DataConfig:
     denoise: bool = False  # targets from the events that nearby pixels confirm (see docs)
     denoise_slab: float = 2.0  # denoise: time slab, in views, within which company counts
     crop_from_events: bool = True  # shrink the crop to the events' visual hull (if no crop set)
+    offset_from_events: bool = True  # polarity offset from the events if none is stated
     eps_from_events: bool = True  # cap tonemap_eps (eps_max, and what the events' changes need)
     eps_max: float = 1e-3  # eps_from_events: the largest tonemap eps the loss uses
     eps_start: float | None = None  # eps at step 0 (eps_from_events sets it when it lowers eps)
@@ -166,8 +167,9 @@ class DataConfig:
 
     def overrides(self) -> dict[str, Any]:
         """The preset overrides that are set, as ``{name: value}`` for the data module."""
-        skip = {"path", "split", "denoise", "denoise_slab", "crop_from_events", "eps_from_events",
-                "eps_max", "eps_start", "eps_anneal_steps"}
+        skip = {"path", "split", "denoise", "denoise_slab", "crop_from_events",
+                "offset_from_events", "eps_from_events", "eps_max", "eps_start",
+                "eps_anneal_steps"}
         out = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)

@@ -39,6 +39,8 @@ def test_info_table(run_cli, scene):
     assert "fit: tonemap eps 1e-05, the preset's" in out
     # 400 events spread over 24x16 pixels: noise, and too dense to filter
     assert "noise: events: the noise is too dense" in out and "(data.denoise, off" in out
+    # 400 events over 384 pixels: no pixel busy enough to say what the polarity offset is
+    assert "polarity: too few pixels" in out and "a fit keeps the preset's -0.406" in out
 
 
 def test_info_override_and_split(run_cli, scene):

@@ -315,29 +315,35 @@ def test_inv_s_floor_min_steps_spares_a_short_fit(scene):
 
 
 def test_hull_term_empties_the_space_the_event_hull_calls_free(scene):
-    """The initial sphere fills space that no event rules out but the event silhouettes
+    """The initial sphere grows into space that no event rules out but the event silhouettes
     call empty; the hull term pushes the SDF there positive (measured without the curvature
-    prior, whose smoothing also moves the surface in these 40 steps)."""
-    trainers = {}
-    for name, lam, start in (("0", 0, 0), ("1", 1, 0), ("late", 1, 1000)):
-        trainer, _ = prepare(scene, tiny("train.iters=40", f"loss.lambda_hull={lam}",
-                                         f"loss.hull_start={start}", "loss.hull_ramp=0",
-                                         "loss.lambda_curvature=0"),
+    prior, whose smoothing also moves the surface in these 40 steps). A 40-step fit's share
+    of matter there swings between seeds and CPUs (0.06-0.13 without the term), so the test
+    compares medians over three seeds, at a weight that makes the term count within 40
+    steps."""
+    def fitted(lam: float, start: int, seed: int):
+        trainer, _ = prepare(scene, tiny("train.iters=40", f"train.seed={seed}",
+                                         f"loss.lambda_hull={lam}", f"loss.hull_start={start}",
+                                         "loss.hull_ramp=0", "loss.lambda_curvature=0"),
                              device="cpu")
         trainer.fit(progress=False)
-        trainers[name] = trainer
-    assert trainers["0"].free_space is None
-    pts = trainers["1"]._random_points(20000)
-    free = trainers["1"].free_space.free(pts)
+        return trainer
+
+    arms = {"0": [fitted(0, 0, s) for s in range(3)], "5": [fitted(5, 0, s) for s in range(3)],
+            "late": [fitted(5, 1000, 0)]}
+    assert arms["0"][0].free_space is None
+    probe = arms["5"][0]
+    pts = probe._random_points(20000)
+    free = probe.free_space.free(pts)
     assert free.float().mean() > 0.1
     share = {}
-    for lam, trainer in trainers.items():
+    for name, trainers in arms.items():
         with torch.no_grad():
-            share[lam] = float((trainer.field.sdf(pts[free]) < 0).float().mean())
-    assert share["0"] > 0.05
-    assert share["1"] < 0.5 * share["0"]
+            share[name] = [float((t.field.sdf(pts[free]) < 0).float().mean()) for t in trainers]
+    assert np.median(share["0"]) > 0.05
+    assert np.median(share["5"]) < 0.5 * np.median(share["0"])
     # before loss.hull_start the term is not there at all
-    assert share["late"] == pytest.approx(share["0"], abs=0.02)
+    assert share["late"][0] == pytest.approx(share["0"][0], abs=0.02)
 
 
 @pytest.mark.slow

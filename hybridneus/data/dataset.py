@@ -23,7 +23,12 @@ from typing import Any
 import numpy as np
 
 from hybridneus.data.events import EventStream, load_events
-from hybridneus.data.presets import ScenePreset, apply_overrides, resolve_preset
+from hybridneus.data.presets import (
+    PRESET_FIELDS,
+    ScenePreset,
+    apply_overrides,
+    resolve_preset_fields,
+)
 from hybridneus.errors import DatasetError
 
 log = logging.getLogger(__name__)
@@ -92,6 +97,9 @@ class EventDataset:
         preset_source: where the preset came from, e.g. ``"path (real/multimeter)"``.
         splits: split name -> :class:`SplitData`.
         notes: messages worth showing to the user (polarity conversion, size checks).
+        stated: the preset fields that the path, ``scene.json``, the caller or an override
+            gave; the others are the fallback's ``nerf`` values, which a fit may replace with
+            estimates from the events (``data.offset_from_events``).
     """
 
     root: Path
@@ -99,6 +107,7 @@ class EventDataset:
     preset_source: str
     splits: dict[str, SplitData]
     notes: list[str] = field(default_factory=list)
+    stated: frozenset[str] = frozenset(PRESET_FIELDS)
 
     def __getitem__(self, split: str) -> SplitData:
         try:
@@ -366,11 +375,12 @@ def load_dataset(
     if not root.is_dir():
         raise DatasetError(f"{root}: not a folder")
     if preset is None:
-        preset, source = resolve_preset(root)
+        preset, source, stated = resolve_preset_fields(root)
     else:
-        source = "given"
+        source, stated = "given", frozenset(PRESET_FIELDS)
     if overrides:
         preset = apply_overrides(preset, overrides)
+        stated = stated | frozenset(overrides)
         source += " + overrides (" + ", ".join(f"{k}={v}" for k, v in overrides.items()) + ")"
     notes: list[str] = []
     if source.startswith("fallback"):
@@ -396,4 +406,4 @@ def load_dataset(
                 raise DatasetError(f"{root / s}: missing split folder (found: {have})")
     loaded = {s: load_split(found[s], preset.width, preset.height, notes) for s in wanted}
     return EventDataset(root=root, preset=preset, preset_source=source, splits=loaded,
-                        notes=notes)
+                        notes=notes, stated=stated)

@@ -198,9 +198,14 @@ class DenoiseReport:
     kept: int
     total: int
 
+    @property
+    def too_dense(self) -> bool:
+        """The noise was too dense to tell from the object, and every event was kept."""
+        return self.bar == 0 and math.isnan(self.noise_rate)
+
     def line(self) -> str:
         """One log line."""
-        if self.bar == 0 and math.isnan(self.noise_rate):
+        if self.too_dense:
             return (f"events: the noise is too dense to tell from the object; the filter keeps "
                     f"all {self.total}")
         if self.bar == 0 and self.noise_share <= SURVIVAL:

@@ -247,16 +247,24 @@ def parse_override_strings(items: list[str] | None) -> dict[str, str]:
     return out
 
 
-def _preset_from_parts(parts: tuple[str, ...]) -> tuple[ScenePreset, str] | None:
-    """Find ``<group>/<scene>`` in path parts (the last matching group wins)."""
+def _preset_from_parts(
+    parts: tuple[str, ...],
+) -> tuple[ScenePreset, str, frozenset[str]] | None:
+    """Find ``<group>/<scene>`` in path parts (the last matching group wins); also return the
+    fields it states: all of them for a published scene, all but the polarity offset (the
+    group's default is a guess at a sensor's) for another scene of the group."""
     for i in range(len(parts) - 2, -1, -1):
         group = parts[i]
         if group in GROUP_DEFAULTS:
             scene = parts[i + 1]
             preset = preset_for_scene(group, scene)
             if scene in SCENE_VALUES[group]:
-                return preset, f"path ({group}/{scene})"
-            return preset, f"path ({group}/, unknown scene {scene!r}: {group} group defaults)"
+                return preset, f"path ({group}/{scene})", frozenset(PRESET_FIELDS)
+            return (
+                preset,
+                f"path ({group}/, unknown scene {scene!r}: {group} group defaults)",
+                frozenset(PRESET_FIELDS) - {"polarity_offset"},
+            )
     return None
 
 
@@ -304,6 +312,20 @@ def resolve_preset(path: str | os.PathLike) -> tuple[ScenePreset, str]:
     Raises:
         DatasetError: ``scene.json`` exists but is unreadable or holds bad values.
     """
+    preset, source, _ = resolve_preset_fields(path)
+    return preset, source
+
+
+def resolve_preset_fields(
+    path: str | os.PathLike,
+) -> tuple[ScenePreset, str, frozenset[str]]:
+    """:func:`resolve_preset`, plus the fields that the path or ``scene.json`` stated.
+
+    A published scene's path states all of its fields, another scene of a group all but the
+    polarity offset; ``scene.json`` states the keys it holds; the ``nerf`` values of the
+    fallback state nothing. A reader may estimate what is not stated from the data (the
+    polarity offset: :mod:`hybridneus.data.balance`).
+    """
     root = Path(path)
     resolved = root.resolve()
     parts = resolved.parts
@@ -317,8 +339,9 @@ def resolve_preset(path: str | os.PathLike) -> tuple[ScenePreset, str]:
             for key in unknown:
                 log.warning("%s: ignoring unknown preset key %r", scene_json, key)
                 values.pop(key)
+            stated = frozenset(values) | (from_path[2] if from_path else frozenset())
             try:
-                return apply_overrides(base, values), "scene.json"
+                return apply_overrides(base, values), "scene.json", stated
             except ConfigError as exc:
                 raise DatasetError(f"{scene_json}: preset {exc}") from None
     if from_path is not None:
@@ -327,4 +350,5 @@ def resolve_preset(path: str | os.PathLike) -> tuple[ScenePreset, str]:
         replace(_NERF, group="custom", scene=resolved.name),
         "fallback: path names no nerf/real/nextnextgen scene and no scene.json preset, "
         "using nerf group values",
+        frozenset(),
     )

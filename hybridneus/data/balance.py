@@ -1,0 +1,131 @@
+"""The polarity offset that the events' own balance implies.
+
+Real DAVIS sensors fire positive and negative events at different thresholds; the EventNeRF
+reference code corrects this by adding a per-scene ``polarity_offset`` ``o`` to every
+polarity, so that a positive event stands for a change of ``C (1 + o)`` and a negative one for
+``-C (1 - o)`` (``o`` near -0.4 on the published real scenes). A dataset's path names that
+value for the published scenes; for any other data the reader falls back to ``o = 0``, and a
+wrong offset adds a drift of ``C o`` per event to every target.
+
+The data say what ``o`` is. Over a capture that comes back to where it started (a turntable,
+a closed orbit) each pixel sees the same brightness at the end as at the start, so its events
+sum to no change: ``n+ (1 + o) = n- (1 - o)``, that is ``o = (n- - n+) / (n+ + n-)``. Along an
+open path the per-pixel sums are not zero, but they do not lean to one sign. The estimate is
+the median of that ratio over the pixels with at least ``MIN_EVENTS`` events, taken after the
+background-activity filter (:mod:`hybridneus.data.denoise`): balanced noise events would pull
+each pixel's ratio towards 0, and a hot pixel (one polarity, many events) is one pixel of
+thousands in a median. A count-weighted mean would lean towards the pixels whose thresholds
+happen to be smallest, which fire the most.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from hybridneus.data.dataset import SplitData
+from hybridneus.data.denoise import DenoiseReport, denoised_split
+from hybridneus.data.events import EventStream
+
+#: Events per bincount call (bounds its int64 copy).
+_CHUNK = 1 << 22
+#: Events a pixel needs before its balance counts.
+MIN_EVENTS = 8
+#: Pixels the median needs before it is an estimate.
+MIN_PIXELS = 50
+#: Estimates closer to 0 than this are read as balanced polarities (offset 0).
+BALANCED = 0.05
+#: A stated offset this far from the estimate gets a warning (the published real scenes'
+#: offsets span 0.1).
+DISAGREE = 0.15
+
+
+@dataclass(frozen=True)
+class PolarityBalance:
+    """The offset the events imply (see the module docstring).
+
+    Attributes:
+        offset: the median of ``(n- - n+) / (n+ + n-)`` over the pixels counted; ``None``
+            when fewer than ``MIN_PIXELS`` pixels have ``MIN_EVENTS`` events.
+        pixels: pixels counted.
+        events: events those pixels hold.
+        dense_noise: the noise filter found the noise too dense to tell from the object and
+            kept every event; balanced noise then pulls the estimate towards 0.
+    """
+
+    offset: float | None
+    pixels: int
+    events: int
+    dense_noise: bool = False
+
+    @property
+    def balanced(self) -> bool:
+        """The polarities balance (the estimate is within ``BALANCED`` of 0)."""
+        return self.offset is not None and abs(self.offset) < BALANCED
+
+    def suggested(self) -> float | None:
+        """The offset to use: 0 for balanced polarities, else the estimate rounded to three
+        decimals; ``None`` without an estimate."""
+        if self.offset is None:
+            return None
+        return 0.0 if self.balanced else round(self.offset, 3)
+
+    def line(self) -> str:
+        """One log line."""
+        if self.offset is None:
+            return (f"polarity: too few pixels with {MIN_EVENTS} or more events ({self.pixels})"
+                    " to estimate the offset from the events")
+        where = f"median over {self.pixels} pixels with {MIN_EVENTS} or more events"
+        where += (", noise too dense to filter: it pulls the estimate towards 0"
+                  if self.dense_noise else ", after the noise filter")
+        if self.balanced:
+            return f"polarity: the events are balanced (offset {self.offset:+.3f}; {where})"
+        return f"polarity: the events imply an offset of {self.offset:+.3f} ({where})"
+
+
+def balance_offset(events: EventStream, width: int, height: int) -> PolarityBalance:
+    """The polarity offset implied by ``events``, taken as they are (no noise filter).
+
+    Args:
+        events: the stream (polarities -1/+1).
+        width: image width.
+        height: image height.
+
+    Returns:
+        The :class:`PolarityBalance`.
+    """
+    code = events.pixel_code(width)  # cached: the window sampler counts with it too
+    counts = np.zeros(2 * width * height, np.int64)
+    for start in range(0, code.size, _CHUNK):  # bincount makes an int64 copy of its input
+        counts += np.bincount(code[start:start + _CHUNK], minlength=counts.size)
+    neg, pos = counts.reshape(-1, 2).T
+    n = neg + pos
+    counted = n >= MIN_EVENTS
+    pixels = int(np.count_nonzero(counted))
+    held = int(n[counted].sum())
+    if pixels < MIN_PIXELS:
+        return PolarityBalance(None, pixels, held)
+    ratio = (neg[counted] - pos[counted]) / n[counted]
+    return PolarityBalance(float(np.median(ratio)), pixels, held)
+
+
+def polarity_balance(
+    split: SplitData,
+    slab_views: float = 2.0,
+    denoised: tuple[SplitData, DenoiseReport] | None = None,
+) -> PolarityBalance:
+    """The polarity offset implied by a split's events, after the noise filter.
+
+    Args:
+        split: the split (a closed capture gives the most exact estimate).
+        slab_views: the noise filter's slab length, in views
+            (:func:`hybridneus.data.denoise.denoised_split`).
+        denoised: what ``denoised_split(split, slab_views)`` returned, if the caller has it.
+
+    Returns:
+        The :class:`PolarityBalance`.
+    """
+    kept, report = denoised if denoised is not None else denoised_split(split, slab_views)
+    found = balance_offset(kept.events, split.width, split.height)
+    return replace(found, dense_noise=report.too_dense)

@@ -1,0 +1,178 @@
+"""The polarity offset estimated from the events' balance, and where a fit takes it."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hybridneus.data.balance import (
+    MIN_EVENTS,
+    MIN_PIXELS,
+    balance_offset,
+    polarity_balance,
+)
+from hybridneus.data.dataset import SplitData
+from hybridneus.data.events import EventStream
+
+W, H = 64, 48
+
+
+def _split(x, y, t, p, n_views: int) -> SplitData:
+    order = np.argsort(t, kind="stable")
+    ev = EventStream(np.asarray(x, np.int16)[order], np.asarray(y, np.int16)[order],
+                     np.asarray(t, np.float64)[order], np.asarray(p, np.int8)[order])
+    return SplitData(
+        name="train", path=Path("train"), c2w=np.tile(np.eye(4), (n_views, 1, 1)),
+        intrinsics=np.tile(np.eye(3), (n_views, 1, 1)), distortion=np.zeros((n_views, 2)),
+        width=W, height=H, view_names=[f"{i:04d}" for i in range(n_views)], events=ev,
+    )
+
+
+def _bar_and_back(offset: float, noise_rate: float, seed: int = 0,
+                  threshold: float = 0.1) -> SplitData:
+    """A bright bar, 6 columns wide, sweeps right over columns 8..39 and back (a closed loop
+    of 1,000 views, a column every 12 views). Each pixel of rows 12..27 rises by its own step as
+    the bar arrives and falls by the same step as it leaves; a sensor with polarity offset
+    ``offset`` fires a positive event per ``C (1 + offset)`` of rise and a negative one per
+    ``C (1 - offset)`` of fall. Balanced background activity of ``noise_rate`` events per
+    pixel and view and two hot pixels (one polarity each) come on top."""
+    rng = np.random.default_rng(seed)
+    c_pos, c_neg = threshold * (1 + offset), threshold * (1 - offset)
+    step = rng.uniform(0.5, 1.5, (W, H))
+    n_up, n_down = (step // c_pos).astype(int), (step // c_neg).astype(int)
+    xs, ys, ts, ps = [], [], [], []
+    for col in range(8, 40):
+        for arrive, leave in ((col - 8, col - 2), (80 - col, 86 - col)):
+            for t_edge, n, sign in ((arrive, n_up, 1), (leave, n_down, -1)):
+                count = n[col, 12:28]
+                xs.append(np.full(count.sum(), col))
+                ys.append(np.repeat(np.arange(12, 28), count))
+                ts.append(12 * (t_edge + rng.uniform(-0.3, 0.3, count.sum())))
+                ps.append(np.full(count.sum(), sign))
+    n_views = 1000
+    n_noise = rng.poisson(noise_rate * W * H * (n_views - 1))
+    xs.append(rng.integers(0, W, n_noise))
+    ys.append(rng.integers(0, H, n_noise))
+    ts.append(rng.random(n_noise) * (n_views - 1))
+    ps.append(rng.choice([-1, 1], n_noise))
+    hot_t = np.arange(0.0, n_views - 1, 0.5)
+    for hx, sign in ((2, 1), (W - 2, -1)):
+        xs.append(np.full(hot_t.size, hx))
+        ys.append(np.full(hot_t.size, 45))
+        ts.append(hot_t)
+        ps.append(np.full(hot_t.size, sign))
+    t = np.clip(np.concatenate(ts), 0.0, n_views - 1)
+    t[0] = n_views - 1
+    return _split(np.concatenate(xs), np.concatenate(ys), t, np.concatenate(ps), n_views)
+
+
+@pytest.mark.parametrize("offset", [-0.4, -0.2, 0.25])
+def test_a_closed_loop_gives_its_offset_back_through_noise_and_hot_pixels(offset):
+    # 5 background events per pixel: many pixels away from the bar pass MIN_EVENTS on noise
+    split = _bar_and_back(offset, noise_rate=0.005)
+    found = polarity_balance(split)
+    assert found.offset == pytest.approx(offset, abs=0.02) and not found.dense_noise
+    assert found.suggested() == round(found.offset, 3)
+    assert "imply an offset" in found.line() and "after the noise filter" in found.line()
+    # without the filter those pixels pull the median towards 0
+    raw = balance_offset(split.events, W, H)
+    assert abs(raw.offset - offset) > abs(found.offset - offset) + 0.015
+    assert abs(raw.offset) < abs(offset)
+    # the event-weighted mean, which the median replaces, leans to 0 more
+    assert abs(-split.events.p.mean() - offset) > 0.05
+
+
+def test_balanced_events_read_as_offset_zero():
+    found = polarity_balance(_bar_and_back(0.0, noise_rate=0.005))
+    assert found.balanced and found.suggested() == 0.0
+    assert "balanced" in found.line()
+
+
+def test_noise_too_dense_to_filter_is_said():
+    found = polarity_balance(_bar_and_back(-0.4, noise_rate=0.008))
+    assert found.dense_noise and "too dense to filter" in found.line()
+    assert -0.4 < found.offset < -0.05  # pulled towards 0, not past it
+
+
+def test_too_few_busy_pixels_give_no_estimate():
+    rng = np.random.default_rng(1)
+    n = MIN_EVENTS * (MIN_PIXELS - 1)  # MIN_PIXELS - 1 pixels with MIN_EVENTS events each
+    pix = np.repeat(np.arange(MIN_PIXELS - 1) * 7, MIN_EVENTS)
+    split = _split(pix % W, pix // W, np.sort(rng.random(n) * 10), np.ones(n), 11)
+    found = balance_offset(split.events, W, H)
+    assert found.offset is None and found.suggested() is None and found.pixels == MIN_PIXELS - 1
+    assert "too few pixels" in found.line()
+    empty = EventStream(*(a[:0] for a in (split.events.x, split.events.y, split.events.t,
+                                          split.events.p)))
+    assert balance_offset(empty, W, H).offset is None
+
+
+@pytest.fixture(scope="module")
+def lopsided(tmp_path_factory):
+    """The built-in scene on one circle (a closed loop) seen by a sensor with polarity offset
+    -0.4, written twice: at a path that names no group and with its scene.json preset (which
+    states the offset) removed, and under ``real/`` as an unpublished scene."""
+    from hybridneus.simulate import EventModel, SimulationConfig, simulate_dataset
+
+    root = tmp_path_factory.mktemp("balance")
+    cfg = SimulationConfig(n_views=60, width=64, height=48, val_views=0, test_views=0,
+                           spiral="circle", revolutions=1.0, supersample=1,
+                           events=EventModel(threshold=0.1, polarity_offset=-0.4))
+    custom = root / "device"
+    simulate_dataset("builtin:device", custom, cfg)
+    scene = json.loads((custom / "scene.json").read_text())
+    scene.pop("preset", None)
+    (custom / "scene.json").write_text(json.dumps(scene))
+    real = root / "real" / "device"
+    real.parent.mkdir()
+    shutil.copytree(custom, real)
+    return custom, real
+
+
+def _config(*overrides: str):
+    from hybridneus.config import apply_overrides, preset_config
+
+    # the crop from the events is not what these tests are about, and it takes the time
+    return apply_overrides(preset_config("fast"), ["data.crop_from_events=false", *overrides])
+
+
+def test_a_fit_takes_the_offset_from_the_events_when_nothing_states_one(lopsided):
+    from hybridneus.api import load_training_data
+    from hybridneus.data import load_dataset
+
+    custom, real = lopsided
+    assert load_dataset(custom).preset.polarity_offset == 0.0  # the fallback's
+    cfg = _config()
+    data = load_training_data(cfg, custom)
+    assert data.preset.polarity_offset == pytest.approx(-0.4, abs=0.05)
+    assert cfg.data.polarity_offset == data.preset.polarity_offset  # a resume reuses it
+    assert any("from the events' balance" in note for note in data.notes)
+    # an unpublished scene of the real group: the group's -0.404 is a guess, replaced too
+    data = load_training_data(_config(), real)
+    assert data.preset.group == "real"
+    assert data.preset.polarity_offset == pytest.approx(-0.4, abs=0.05)
+    assert data.preset.polarity_offset != -0.404
+    # off: the fallback's 0 stays
+    off = _config("data.offset_from_events=false")
+    assert load_training_data(off, custom).preset.polarity_offset == 0.0
+    # the config states one: it is kept
+    given = _config("data.polarity_offset=-0.1")
+    assert load_training_data(given, custom).preset.polarity_offset == -0.1
+
+
+def test_a_stated_offset_is_kept_with_a_warning_when_the_events_disagree(lopsided, tmp_path,
+                                                                          caplog):
+    from hybridneus.api import load_training_data
+
+    custom, _ = lopsided
+    published = tmp_path / "nerf" / "lego"  # a published scene: its preset states 0
+    shutil.copytree(custom, published)
+    with caplog.at_level("WARNING", logger="hybridneus"):
+        data = load_training_data(_config(), published)
+    assert data.preset.polarity_offset == 0.0
+    assert any("but the events imply -0." in r.getMessage() for r in caplog.records)
+    assert any("--set data.polarity_offset=" in note for note in data.notes)
