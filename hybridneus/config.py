@@ -131,6 +131,7 @@ class TrainConfig:
     collapse_opacity: float = 0.01  # a window's mean opacity below this: restore (0: off)
     collapse_window: int = 25  # steps per opacity mean, and between the restorable states
     collapse_retries: int = 3  # restores before the run goes on empty
+    collapse_healthy: float = 0.1  # a window's mean opacity from this: a restore point
     collapse_lr_factor: float = 0.5  # learning-rate multiplier after each restore
     threads: int = 0  # torch CPU threads (0: leave torch's default)
     log_every: int = 10  # steps between metrics.csv rows / TensorBoard scalars

@@ -444,6 +444,37 @@ def test_an_emptied_field_is_restored_from_two_windows_back(scene, caplog):
     assert np.mean([lg["opacity"] for lg in logs]) > 0.05
 
 
+def test_a_field_that_empties_again_goes_one_restore_point_further_back(scene, caplog):
+    cfg = tiny("train.iters=200", "train.collapse_window=5", "train.decay_start=1.0")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    start = _params(trainer.field)
+    at_5 = _empty_after(trainer, 10)  # restore points: the start, steps 5 and 10
+    for _ in range(5):
+        trainer.train_step()
+    assert trainer.restores == 1  # step 10 dropped, step 5 loaded
+    assert all(torch.equal(v, at_5[k]) for k, v in _params(trainer.field).items())
+    _empty(trainer.field)  # empty again before the next window can be a restore point
+    with caplog.at_level("WARNING", logger="hybridneus"):
+        for _ in range(5):
+            trainer.train_step()
+    assert trainer.restores == 2 and trainer.lr_scale == 0.25
+    assert "state of step 0" in caplog.text  # not step 5 a second time
+    assert all(torch.equal(v, start[k]) for k, v in _params(trainer.field).items())
+
+
+def test_only_windows_with_healthy_opacity_are_restore_points(scene, caplog):
+    # no window reaches this bar: an emptied field goes back to where the run started
+    cfg = tiny("train.iters=200", "train.collapse_window=5", "train.collapse_healthy=1.01")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    start = _params(trainer.field)
+    _empty_after(trainer, 10)
+    with caplog.at_level("WARNING", logger="hybridneus"):
+        for _ in range(5):
+            trainer.train_step()
+    assert trainer.restores == 1 and "state of step 0" in caplog.text
+    assert all(torch.equal(v, start[k]) for k, v in _params(trainer.field).items())
+
+
 def test_without_the_guard_an_emptied_field_stays_empty(scene):
     cfg = tiny("train.iters=200", "train.collapse_window=5", "train.collapse_opacity=0")
     trainer, _ = prepare(scene, cfg, device="cpu")

@@ -219,7 +219,7 @@ class Trainer:
         self.occupied_fraction = 1.0
         self.time_budget = cfg.train.minutes * 60.0 if cfg.train.minutes > 0 else None
         # The collapse guard (see _guard_collapse): learning-rate multiplier, step of the last
-        # restore (its warm-up restarts there), restores so far, and the recent states.
+        # restore (its warm-up restarts there), restores so far, and the restore points.
         self.lr_scale = 1.0
         self.warm_from = 0
         self.restores = 0
@@ -530,12 +530,17 @@ class Trainer:
         ten steps the SDF is positive on every sample (seen on small objects on a turntable,
         at half of the seeds). Nothing then has a gradient: an empty field renders the
         background at both ends of every window, and the occupancy grid stops sampling. The
-        guard averages the rendered opacity over ``train.collapse_window`` steps; when that
-        mean falls below ``train.collapse_opacity`` it loads the field saved two windows
-        earlier (the one saved a window earlier may already be on its way out), clears the
+        guard averages the rendered opacity over ``train.collapse_window`` steps. A window
+        whose mean reaches ``train.collapse_healthy`` makes the field at its end a restore
+        point; when a mean falls below ``train.collapse_opacity`` the guard drops the newest
+        restore point (it may already be on its way out), loads the one before, clears the
         optimiser's moments, scales the learning rate by ``train.collapse_lr_factor`` and
-        warms it up again. The batches after the restore are new draws, so the run does not
-        replay its collapse. After ``train.collapse_retries`` restores it lets the run go on.
+        warms it up again. A field that empties again before a new restore point goes back
+        one point further each time, down to the state the run started from: a state whose
+        opacity was already sinking (0.13 -> 0.03 over the next 50 steps on a turntable) had
+        emptied again after every restore. The batches after a restore are new draws, so the
+        run does not replay its collapse. After ``train.collapse_retries`` restores it lets
+        the run go on.
         """
         t = self.cfg.train
         if t.collapse_opacity <= 0 or t.collapse_window <= 0:
@@ -545,18 +550,25 @@ class Trainer:
             return
         mean = sum(self._window_opacity) / len(self._window_opacity)
         self._window_opacity = []
+        points = self._snapshots
         if mean >= t.collapse_opacity:
-            self._snapshots = [self._snapshots[-1], (self.step, self._field_copy())]
+            if mean >= t.collapse_healthy:
+                points.append((self.step, self._field_copy()))
+                # the first point (where the run started) is kept as the last resort
+                keep = t.collapse_retries + 2
+                if len(points) > keep:
+                    del points[1:len(points) - keep + 1]
             return
         if self.restores >= t.collapse_retries:
             return
-        back_to, state = self._snapshots[0]
+        if len(points) > 1:
+            points.pop()
+        back_to, state = points[-1]
         self.field.load_state_dict(state)
         self.optimizer.state.clear()
         self.restores += 1
         self.lr_scale *= t.collapse_lr_factor
         self.warm_from = self.step
-        self._snapshots = [(back_to, state)]
         logging.getLogger("hybridneus").warning(
             "step %d: the field emptied (mean opacity %.4f over %d steps); restored its state "
             "of step %d with the learning rate x%g (restore %d of at most %d)",
