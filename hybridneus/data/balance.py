@@ -4,8 +4,9 @@ Real DAVIS sensors fire positive and negative events at different thresholds; th
 reference code corrects this by adding a per-scene ``polarity_offset`` ``o`` to every
 polarity, so that a positive event stands for a change of ``C (1 + o)`` and a negative one for
 ``-C (1 - o)`` (``o`` near -0.4 on the published real scenes). A dataset's path names that
-value for the published scenes; for any other data the reader falls back to ``o = 0``, and a
-wrong offset adds a drift of ``C o`` per event to every target.
+value for the published scenes; for any other data the reader can only guess (0, or the
+``real`` group's -0.404 for an unpublished scene under ``real/``), and a wrong offset adds a
+drift of ``C o`` per event to every target.
 
 The data say what ``o`` is. Over a capture that comes back to where it started (a turntable,
 a closed orbit) each pixel sees the same brightness at the end as at the start, so its events
