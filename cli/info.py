@@ -111,14 +111,12 @@ def info(
 
 def _offset_use(ds, balance) -> str:
     """What a fit with the defaults does with the estimate ``balance``."""
-    from hybridneus.data.balance import DISAGREE
-
     offset, stated = balance.suggested(), ds.preset.polarity_offset
     if "polarity_offset" not in ds.stated:
         if offset is None:
             return f"a fit keeps the preset's {stated:g}"
         return f"a fit uses {offset:g} (data.offset_from_events)"
-    if offset is not None and abs(offset - stated) > DISAGREE:
+    if balance.disagrees(stated):
         return (f"the preset's {stated:g} disagrees: --set data.polarity_offset={offset:g} "
                 "uses the events'")
     return f"a fit keeps the preset's {stated:g}"

@@ -65,10 +65,13 @@ def load_training_data(cfg: Config, dataset: Any = None):
         dataset = load_dataset(
             path, overrides=cfg.data.overrides() or None, splits=cfg.data.split
         )
-    if cfg.data.offset_from_events and cfg.data.polarity_offset is None:
-        dataset = _offset_from_events(cfg, dataset)
+    estimate_offset = cfg.data.offset_from_events and cfg.data.polarity_offset is None
+    # one pass of the noise filter serves the offset estimate and data.denoise
+    denoised = _noise_filtered(cfg, dataset) if estimate_offset or cfg.data.denoise else None
+    if estimate_offset:
+        dataset = _offset_from_events(cfg, dataset, denoised)
     if cfg.data.denoise:
-        dataset = _denoise(cfg, dataset)
+        dataset = _denoise(cfg, dataset, denoised)
     crop_keys = ("crop_r", "crop_y_min", "crop_y_max")
     if cfg.data.crop_from_events and all(getattr(cfg.data, k) is None for k in crop_keys):
         dataset = _crop_from_events(cfg, dataset, crop_keys)
@@ -77,25 +80,37 @@ def load_training_data(cfg: Config, dataset: Any = None):
     return dataset
 
 
-def _offset_from_events(cfg: Config, dataset: Any) -> Any:
+def _noise_filtered(cfg: Config, dataset: Any) -> tuple[Any, Any]:
+    """:func:`hybridneus.data.denoise.denoised_split` of the training split at
+    ``data.denoise_slab``: ``(kept split, report)``."""
+    from hybridneus.data.denoise import denoised_split
+
+    if not cfg.data.denoise_slab > 0:
+        raise ConfigError(f"data.denoise_slab: expected a number of views > 0, got "
+                          f"{cfg.data.denoise_slab}")
+    return denoised_split(dataset[cfg.data.split], cfg.data.denoise_slab)
+
+
+def _offset_from_events(cfg: Config, dataset: Any, denoised: tuple[Any, Any]) -> Any:
     """``dataset`` (a copy, when the offset changes) with the polarity offset its events imply
-    (:func:`hybridneus.data.balance.polarity_balance`), if nothing stated one; a stated offset
-    is kept, with a warning when the events disagree with it by more than ``DISAGREE``."""
+    (:func:`hybridneus.data.balance.polarity_balance`, on the ``denoised`` training split), if
+    nothing stated one; a stated offset is kept, with a warning when the events disagree with
+    it (:meth:`~hybridneus.data.balance.PolarityBalance.disagrees`)."""
     import copy
     import logging
 
     from hybridneus.data import apply_overrides as preset_overrides
-    from hybridneus.data.balance import DISAGREE, polarity_balance
+    from hybridneus.data.balance import polarity_balance
 
     log = logging.getLogger("hybridneus")
     p = dataset.preset
-    balance = polarity_balance(dataset[cfg.data.split])
+    balance = polarity_balance(dataset[cfg.data.split], cfg.data.denoise_slab, denoised)
     log.info(balance.line())
     suggested = balance.suggested()
     if suggested is None:
         return dataset
     if "polarity_offset" in dataset.stated:
-        if abs(suggested - p.polarity_offset) > DISAGREE:
+        if balance.disagrees(p.polarity_offset):
             msg = (f"polarity offset {p.polarity_offset:g} (preset from the "
                    f"{dataset.preset_source}), but the events imply {suggested:g}; --set "
                    f"data.polarity_offset={suggested:g} uses theirs")
@@ -116,18 +131,13 @@ def _offset_from_events(cfg: Config, dataset: Any) -> Any:
     return dataset
 
 
-def _denoise(cfg: Config, dataset: Any) -> Any:
+def _denoise(cfg: Config, dataset: Any, denoised: tuple[Any, Any]) -> Any:
     """``dataset`` (a copy, when anything goes) with the training split's noise events
-    removed (:func:`hybridneus.data.denoise.denoised_split`)."""
+    removed: the ``denoised`` split of :func:`_noise_filtered`."""
     import copy
     import logging
 
-    from hybridneus.data.denoise import denoised_split
-
-    if not cfg.data.denoise_slab > 0:
-        raise ConfigError(f"data.denoise_slab: expected a number of views > 0, got "
-                          f"{cfg.data.denoise_slab}")
-    split, report = denoised_split(dataset[cfg.data.split], cfg.data.denoise_slab)
+    split, report = denoised
     msg = f"{report.line()} (data.denoise)"
     logging.getLogger("hybridneus").info(msg)
     if split is dataset[cfg.data.split]:

@@ -72,6 +72,11 @@ class PolarityBalance:
             return None
         return 0.0 if self.balanced else round(self.offset, 3)
 
+    def disagrees(self, stated: float) -> bool:
+        """The events contradict the ``stated`` offset (by more than ``DISAGREE``)."""
+        offset = self.suggested()
+        return offset is not None and abs(offset - stated) > DISAGREE
+
     def line(self) -> str:
         """One log line."""
         if self.offset is None:
