@@ -28,6 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import common
 import numpy as np
 
 W, H, N_VIEWS = 346, 260, 999
@@ -181,6 +182,7 @@ def main() -> None:
     ap.add_argument("--rays", type=int, default=1024)
     ap.add_argument("--quick", action="store_true", help="300k events, 2 repeats")
     ap.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
+    common.add_arguments(ap, "data")
     args = ap.parse_args()
     if args.child:
         kind, root = args.child[0], args.child[1]
@@ -192,6 +194,7 @@ def main() -> None:
             res = child_sample(root, int(args.child[2]), int(args.child[3]))
         print(json.dumps(res))
         return
+    common.check_tree(args)
     sizes = [3e5] if args.quick else args.events
     repeats = 2 if args.quick else args.repeats
     for n in sizes:
@@ -202,10 +205,13 @@ def main() -> None:
             print(f"## {int(n):,} events, 999 views, {W}x{H}, x/y/p stored as {args.xy_dtype} "
                   f"(npz {npz.stat().st_size / 2**20:.0f} MB, generated in "
                   f"{time.perf_counter() - t0:.1f} s)")
-            print("load:", json.dumps(run_child("load", str(root)), indent=None))
-            print("window:", json.dumps(run_child("window", str(root), str(repeats))))
-            print("sample:", json.dumps(run_child("sample", str(root), str(repeats),
-                                                  str(args.rays))))
+            found = {"load": run_child("load", str(root)),
+                     "window": run_child("window", str(root), str(repeats)),
+                     "sample": run_child("sample", str(root), str(repeats), str(args.rays))}
+            for name, res in found.items():
+                print(f"{name}:", json.dumps(res))
+            common.append(args.out, {"bench": "data", "events": int(n), "rays": args.rays,
+                                     **found, **common.stamp(None)})
 
 
 if __name__ == "__main__":

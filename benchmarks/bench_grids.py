@@ -24,6 +24,7 @@ import statistics
 import time
 from collections.abc import Callable
 
+import common
 import torch
 
 from hybridneus.grids import DenseGrid, HashGrid
@@ -206,7 +207,9 @@ def main() -> None:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--dense", action="store_true",
                     help="compare DenseGrid() with a HashGrid of the same levels instead")
+    common.add_arguments(ap, "grids")
     args = ap.parse_args()
+    common.check_tree(args)
     if args.threads:
         torch.set_num_threads(args.threads)
     if args.dense:
@@ -230,6 +233,11 @@ def main() -> None:
                 ratio = f"{ours / flat:.1f}x" if ours and flat else "-"
                 print(f"| 2^{log2_t} | 2^{log2_n} | {mode} | " + " | ".join(txt) + f" | {ratio} |",
                       flush=True)
+                common.append(args.out, {
+                    "bench": "grids", "log2_t": log2_t, "log2_n": log2_n, "mode": mode,
+                    "mpoints_per_s": {k: (None if c is None else round(c, 4))
+                                      for k, c in zip(args.impl, cells, strict=True)},
+                    **common.stamp(torch.get_num_threads(), args.device)})
 
 
 if __name__ == "__main__":

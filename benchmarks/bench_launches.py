@@ -24,6 +24,7 @@ import statistics
 import time
 from pathlib import Path
 
+import common
 import torch
 
 
@@ -36,7 +37,9 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--warmup", type=int, default=5)
     ap.add_argument("--threads", type=int, default=0)
+    common.add_arguments(ap, "step")
     args = ap.parse_args()
+    common.check_tree(args)
     if args.threads:
         torch.set_num_threads(args.threads)
 
@@ -55,7 +58,7 @@ def main() -> None:
         if trainer.device.type == "cuda":
             torch.cuda.synchronize()
 
-    print(f"device {trainer.device}, preset {args.preset}, {trainer.cfg.train.n_rays} pixels "
+    print(f"device {trainer.device}, preset {args.preset}, {trainer.record.n_rays} pixels "
           f"per step, threads {torch.get_num_threads()}")
     print("| gather | ops / step | non-view | read-backs | median step s |")
     print("|---|---|---|---|---|")
@@ -83,6 +86,11 @@ def main() -> None:
             name += f" ({'joined' if trainer.device.type == 'cuda' else 'per level'})"
         print(f"| {name} | {counter.ops} | {counter.kernels} | {len(counter.reads)} | "
               f"{statistics.median(times):.4f} |", flush=True)
+        common.append(args.out, {
+            "bench": "launches", "preset": args.preset, "rays": trainer.record.n_rays,
+            "gather": name, "ops": counter.ops, "kernels": counter.kernels,
+            "reads": len(counter.reads), "step_s": round(statistics.median(times), 5),
+            **common.stamp(torch.get_num_threads(), str(trainer.device))})
 
 
 if __name__ == "__main__":

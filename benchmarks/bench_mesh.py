@@ -18,6 +18,7 @@ import argparse
 import statistics
 import time
 
+import common
 import torch
 
 
@@ -77,7 +78,9 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     parser.add_argument("--quick", action="store_true", help="res 128, one repeat")
     parser.add_argument("--run", help="a trained run folder: time its field (adds 'trained')")
+    common.add_arguments(parser, "mesh")
     args = parser.parse_args()
+    common.check_tree(args)
     if args.run:
         args.fields = [*args.fields, "trained"] if "trained" not in args.fields else args.fields
     if args.quick:
@@ -104,6 +107,11 @@ def main() -> None:
                     f"{t.get('postprocess', 0):.2f} | {t.get('color', 0):.2f} |",
                     flush=True,
                 )
+                common.append(args.out, {
+                    "bench": "mesh", "field": kind, "res": res, "color": color,
+                    "seconds": round(seconds, 3), "faces": runs[0][2],
+                    "phases_s": {k: round(v, 3) for k, v in t.items()},
+                    **common.stamp(torch.get_num_threads())})
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ Timings on a shared machine are noisy: compare ratios within one run.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import statistics
 import sys
@@ -22,6 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import common
 import numpy as np
 from run_suite import DEFAULT_ASSETS as ASSETS  # the scripts run from benchmarks/
 
@@ -55,8 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate-batches", type=int, default=5, help="timed batches for rates")
     ap.add_argument("--skip-full", action="store_true", help="only the throughput parts")
     ap.add_argument("--quick", action="store_true", help="120 views at 173 x 130")
-    ap.add_argument("--json", type=Path, help="also write the numbers to this file")
+    common.add_arguments(ap, "simulate")
     args = ap.parse_args(argv)
+    common.check_tree(args)
     if args.quick:
         args.views, args.width, args.height = 120, 173, 130
 
@@ -127,8 +128,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{tr['render_s']:.1f} s + events {tr['events_s']:.1f} s + write "
               f"{tr['write_s']:.1f} s (+ setup); {tr['n_events']:,} events, "
               f"events.npz {size / 2**20:.0f} MiB")
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    common.append(args.out, {"bench": "simulate", **results, **common.stamp(args.threads)})
     return 0
 
 

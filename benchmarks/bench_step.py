@@ -13,6 +13,7 @@ import statistics
 import time
 from pathlib import Path
 
+import common
 import torch
 
 
@@ -36,7 +37,9 @@ def main() -> None:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--quick", action="store_true", help="fewer steps and rays")
+    common.add_arguments(ap, "step")
     args = ap.parse_args()
+    common.check_tree(args)
     if args.quick:
         args.steps, args.warmup, args.rays = 4, 1, 128
     if args.threads:
@@ -138,6 +141,10 @@ def main() -> None:
     print("|---|---|")
     for name, t in rows:
         print(f"| {name} | {t:.3f} |")
+    common.append(args.out, {
+        "bench": "step", "preset": args.preset, "rays": args.rays, "points": n_pts,
+        "overrides": args.overrides, "phases_s": {name: round(t, 5) for name, t in rows},
+        **common.stamp(torch.get_num_threads(), str(trainer.device))})
 
 
 if __name__ == "__main__":

@@ -9,20 +9,23 @@ full-size datasets fit one transfer.
     python benchmarks/gpu_pack.py --out gpu_carry /tmp/hybridneus-bench/bunny-999v-346x260-t8 \
         /tmp/hybridneus-bench/xylophone-999v-346x260-t8
 
-Then, on the GPU machine, ``bash benchmarks/gpu_session.sh gpu_carry`` (``gpu_carry`` named in
-the run's ``carry`` and listed in ``.git/info/exclude``). What comes back (per run a tar of its
-small files and its snapshots, flat) is made run folders again with
+Then, on the GPU machine, ``bash benchmarks/gpu_check.sh gpu_carry`` (``gpu_carry`` is
+ignored by git and named in the run's ``carry``). What comes back (per run a tar of its small
+files and its snapshots, flat, and the benchmarks' lines in ``gpu.jsonl``) is made run folders
+again, scored, and added to ``benchmarks/results/`` with
 
     python benchmarks/gpu_pack.py --unpack FILES_AT --out RUNS
-    python benchmarks/run_suite.py --score-runs RUNS/* --image-views 0
 """
 
 from __future__ import annotations
 
 import argparse
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
+import common
 import numpy as np
 
 from hybridneus.fileio import atomic_dir
@@ -49,7 +52,7 @@ def pack(dataset: Path, out: Path) -> int:
 
 
 def unpack(files: Path, out: Path) -> list[Path]:
-    """Run folders from ``gpu_session.sh``'s flat output: ``NAME.tar`` holds the small files,
+    """Run folders from ``gpu_check.sh``'s flat output: ``NAME.tar`` holds the small files,
     ``NAME.<snapshot>.pt`` the snapshots. Returns the run folders made under ``out``."""
     import tarfile
 
@@ -65,17 +68,39 @@ def unpack(files: Path, out: Path) -> list[Path]:
     return runs
 
 
+def merge_lines(files: Path) -> int:
+    """Add the returned ``gpu.jsonl`` lines to ``benchmarks/results/<bench>.jsonl``."""
+    n = 0
+    for line in common.read_lines(files / "gpu.jsonl"):
+        common.append(common.RESULTS / f"{line['bench']}.jsonl", line)
+        n += 1
+    return n
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("datasets", nargs="*", type=Path)
     ap.add_argument("--out", type=Path, default=Path("gpu_carry"))
     ap.add_argument("--unpack", type=Path, metavar="FILES",
-                    help="make run folders under --out from gpu_session.sh's returned files")
+                    help="make run folders under --out from gpu_check.sh's returned files, "
+                    "score them and add every returned line to benchmarks/results/")
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"),
+                    help="where the full datasets are (scoring needs their ground truth)")
     args = ap.parse_args()
     if args.unpack:
-        for run in unpack(args.unpack, args.out):
-            print(run)
+        runs = unpack(args.unpack, args.out)
+        print(f"{merge_lines(args.unpack)} lines added to {common.RESULTS}")
+        if runs:
+            subprocess.run([sys.executable, str(Path(__file__).with_name("run_suite.py")),
+                            "--score-runs", *map(str, runs), "--cache", str(args.cache)],
+                           check=True)
         return
+    commit, dirty = common.git_state()
+    if dirty:
+        raise SystemExit(f"{common.REPO}: uncommitted changes; the GPU machine's lines must "
+                         "name a commit")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "COMMIT").write_text(commit + "\n")
     total = 0
     for dataset in args.datasets:
         size = pack(dataset, args.out)

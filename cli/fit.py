@@ -58,7 +58,8 @@ def fit(
     ] = None,
     minutes: Annotated[
         float | None,
-        typer.Option(help="Wall-clock budget; the schedules adapt to the measured speed.",
+        typer.Option(help="Wall-clock budget of the whole fit, turned into a step count "
+                     "before the first step (saved in the run's scene.yaml).",
                      show_default=False),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed.", show_default=False)] = None,
@@ -69,7 +70,9 @@ def fit(
     Ctrl-C saves a checkpoint (--resume RUN continues); `hybridneus mesh` meshes runs/latest.
     """
     import os
+    import time
 
+    started = time.perf_counter()
     # Transparent huge pages for PyTorch's CPU allocator: large fresh buffers fault in much
     # faster (measured in docs/anchors); must be set before torch is first imported.
     os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")
@@ -78,17 +81,16 @@ def fit(
     from hybridneus.errors import ConfigError
 
     overrides = list(set_ or [])
+    if iters is not None and minutes is not None:
+        raise ConfigError("--iters and --minutes: give one (a budget decides the steps)")
     if iters is not None:
         if iters < 1:
             raise ConfigError(f"--iters {iters}: must be >= 1")
-        overrides.append(f"train.iters={iters}")
+        overrides += [f"train.iters={iters}", "train.minutes=0"]
     if minutes is not None:
         if minutes <= 0:
             raise ConfigError(f"--minutes {minutes}: must be > 0")
         overrides.append(f"train.minutes={minutes}")
-        if iters is None:
-            # The time budget decides; the iteration count only caps it.
-            overrides.append("train.iters=100000000")
     if seed is not None:
         overrides.append(f"train.seed={seed}")
     if resume is None and data is None:
@@ -112,6 +114,7 @@ def fit(
         resume=resume,
         device=device,
         progress=not quiet,
+        started=started,
     )
     run_dir = field.run_dir
     if field.interrupted:

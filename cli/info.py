@@ -1,122 +1,140 @@
-"""``hybridneus info DATA``: what a dataset holds and which preset will be used."""
+"""``hybridneus info DATA``: what a dataset holds, its scene preset, and what a fit would
+estimate from its events."""
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
+
+from hybridneus.cli.options import SetOption
 
 
 def info(
     data: Annotated[Path, typer.Argument(help="Dataset folder, e.g. data/real/multimeter.")],
-    preset_override: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--preset-override",
-            "-o",
-            help="Replace a preset field, key=value (repeatable), e.g. threshold=0.2.",
-        ),
-    ] = None,
+    set_: SetOption = None,
+    preset: Annotated[str, typer.Option(help="Config preset the --set keys apply to.")] = "fast",
     split: Annotated[
         list[str] | None,
         typer.Option("--split", help="Only these splits (repeatable). Default: all."),
     ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object on stdout.")] = False,
 ) -> None:
-    """Show a dataset's splits (views, events, polarity balance, time span, resolution) and
-    the preset in use with its source."""
+    """Show a dataset's splits (views, events, polarity balance, time span, size), the scene
+    preset and its source, and the values a fit would estimate from the events (polarity
+    offset, crop, tonemap eps: the run's scene.yaml gets the same)."""
+    import json
     import logging
-    import sys
 
+    from hybridneus.cli.options import config_with
+    from hybridneus.data import load_dataset
+
+    cfg = config_with(preset, set_)
+    # The findings are printed below; keep the logging copies of them off the terminal.
+    logging.getLogger("hybridneus").setLevel(logging.ERROR)
+    ds = load_dataset(data, overrides=cfg.data.overrides() or None, splits=split or None)
+    report = dataset_report(ds, cfg)
+    if as_json:
+        typer.echo(json.dumps(report, indent=2))
+    else:
+        _print(report)
+
+
+def dataset_report(ds, cfg) -> dict[str, Any]:
+    """Everything ``info`` shows, as plain JSON-ready values."""
     import numpy as np
-    from rich.console import Console
-    from rich.table import Table
 
-    from hybridneus.data import load_dataset, parse_override_strings
+    from hybridneus.data.estimate import estimate_scene, noise_and_balance
 
-    # The notes are printed below; keep the logging copies of them off the terminal.
-    logging.getLogger("hybridneus.data").setLevel(logging.ERROR)
-    overrides = parse_override_strings(preset_override)
-    ds = load_dataset(data, overrides=overrides or None, splits=split or None)
-    # Piped output (no terminal) still gets a table wide enough not to wrap its cells.
-    console = Console(width=None if sys.stdout.isatty() else 130)
-
-    table = Table(title=f"{ds.root}")
-    for col in ("split", "views", "events", "+ / -", "time span", "size", "rgb", "polarity"):
-        table.add_column(col, justify="right" if col in ("views", "events") else "left",
-                         no_wrap=True)
+    splits = {}
     for s in ds.splits.values():
         ev = s.events
         n = len(ev)
-        n_pos = ev.n_positive
+        splits[s.name] = {
+            "views": s.n_views, "events": n,
+            "positive_share": round(ev.n_positive / n, 4) if n else None,
+            "t_first": float(ev.t[0]) if n else None, "t_last": float(ev.t[-1]) if n else None,
+            "width": s.width, "height": s.height,
+            "rgb_frames": len(s.rgb_paths) if s.rgb_paths else 0,
+            "polarity_stored_as": ev.polarity_note, "events_file": str(ev.path),
+            "distortion": (np.median(s.distortion, axis=0).round(6).tolist()
+                           if s.distortion.any() else None),
+        }
+    out: dict[str, Any] = {"dataset": str(ds.root), "preset_source": ds.preset_source,
+                           "preset": ds.preset.to_dict(), "stated": sorted(ds.stated),
+                           "splits": splits, "notes": list(ds.notes)}
+    if cfg.data.split in ds.splits:
+        found = estimate_scene(ds, cfg.estimate, cfg.data)
+        noise, balance = found.noise, found.balance
+        if balance is None:
+            noise, balance = noise_and_balance(ds[cfg.data.split])
+        out["fit"] = {
+            "split": cfg.data.split,
+            "noise": noise,
+            "polarity_balance": balance.offset,
+            "estimated": found.taken,
+            "preset": found.dataset.preset.to_dict(),
+            "eps_start": found.eps_start,
+            "findings": found.lines,
+            "warnings": found.warnings,
+        }
+    return out
+
+
+def _print(report: dict[str, Any]) -> None:
+    import sys
+
+    from rich.console import Console
+    from rich.table import Table
+
+    # Piped output (no terminal) still gets a table wide enough not to wrap its cells.
+    console = Console(width=None if sys.stdout.isatty() else 130)
+
+    def say(text: str) -> None:
+        console.print(text, markup=False, highlight=False)
+
+    table = Table(title=report["dataset"])
+    for col in ("split", "views", "events", "+ / -", "time span", "size", "rgb", "polarity"):
+        table.add_column(col, justify="right" if col in ("views", "events") else "left",
+                         no_wrap=True)
+    for name, s in report["splits"].items():
+        pos = s["positive_share"]
         table.add_row(
-            s.name,
-            str(s.n_views),
-            f"{n:,}",
-            f"{n_pos / n:.1%} / {(n - n_pos) / n:.1%}",
-            f"{float(ev.t[0]):.6g} .. {float(ev.t[-1]):.6g}",
-            f"{s.width}x{s.height}",
-            f"{len(s.rgb_paths)} files" if s.rgb_paths else "absent",
-            "-1/+1" if ev.polarity_note == "-1/+1" else "0/1 -> -1/+1",
+            name, str(s["views"]), f"{s['events']:,}",
+            "-" if pos is None else f"{pos:.1%} / {1 - pos:.1%}",
+            f"{s['t_first']:.6g} .. {s['t_last']:.6g}" if s["events"] else "-",
+            f"{s['width']}x{s['height']}",
+            f"{s['rgb_frames']} files" if s["rgb_frames"] else "absent",
+            "-1/+1" if s["polarity_stored_as"] == "-1/+1" else "0/1 -> -1/+1",
         )
     console.print(table)
-
-    p = ds.preset
-    ptable = Table(title="preset")
-    ptable.add_column("key")
-    ptable.add_column("value")
-    for key, value in p.to_dict().items():
+    fit = report.get("fit")
+    ptable = Table(title="scene preset" + (" (a fit's, with its estimates)" if fit else ""))
+    for col in ("key", "value", "from"):
+        ptable.add_column(col)
+    values = fit["preset"] if fit else report["preset"]
+    for key, value in values.items():
         if key == "background":
             value = ", ".join(f"{v:.4g} ({v * 255:.0f}/255)" for v in value)
-        ptable.add_row(key, str(value))
+        how = "estimated" if fit and key in fit["estimated"] else (
+            "stated" if key in report["stated"] else "fallback")
+        ptable.add_row(key, str(value), how)
     console.print(ptable)
-    console.print(f"preset source: {ds.preset_source}", markup=False, highlight=False)
-    if "train" in ds.splits:
-        from hybridneus.config import DataConfig
-        from hybridneus.data.balance import polarity_balance
-        from hybridneus.data.contrast import event_extent, loss_eps
-        from hybridneus.data.denoise import denoised_split
-
-        defaults = DataConfig()
-        filtered, report = denoised_split(ds.splits["train"], defaults.denoise_slab)
-        state = "on" if defaults.denoise else "off"
-        console.print(f"noise: {report.line()} (data.denoise, {state} by default)",
-                      markup=False, highlight=False)
-        balance = polarity_balance(ds.splits["train"], defaults.denoise_slab,
-                                   (filtered, report))
-        console.print(f"{balance.line()}; {_offset_use(ds, balance)}", markup=False,
-                      highlight=False)
-        # what a fit with the defaults takes
-        train = filtered if defaults.denoise else ds.splits["train"]
-        offset = balance.suggested()
-        estimated = defaults.offset_from_events and "polarity_offset" not in ds.stated
-        if estimated and offset is not None:
-            p = replace(p, polarity_offset=offset)
-        eps, why = loss_eps(p.tonemap_eps, event_extent(train, p), defaults.eps_max)
-        console.print(f"fit: tonemap eps {eps:g}, {why} (data.eps_from_events)",
-                      markup=False, highlight=False)
-    for s in ds.splits.values():
-        console.print(f"{s.name}: events from {s.events.path}, polarity stored as "
-                      f"{s.events.polarity_note}", markup=False, highlight=False)
-        if s.distortion.any():
-            k = np.median(s.distortion, axis=0)
-            console.print(f"{s.name}: radial distortion k1={k[0]:.4g}, k2={k[1]:.4g}",
-                          markup=False, highlight=False)
-    for note in ds.notes:
-        if "polarity stored as" in note:  # already shown per split above
-            continue
-        console.print(f"note: {note}", markup=False, highlight=False)
-
-
-def _offset_use(ds, balance) -> str:
-    """What a fit with the defaults does with the estimate ``balance``."""
-    offset, stated = balance.suggested(), ds.preset.polarity_offset
-    if "polarity_offset" not in ds.stated:
-        if offset is None:
-            return f"a fit keeps the preset's {stated:g}"
-        return f"a fit uses {offset:g} (data.offset_from_events)"
-    if balance.disagrees(stated):
-        return (f"the preset's {stated:g} disagrees: --set data.polarity_offset={offset:g} "
-                "uses the events'")
-    return f"a fit keeps the preset's {stated:g}"
+    say(f"preset source: {report['preset_source']}")
+    if fit:
+        say(f"noise: {fit['noise']}")
+        for line in fit["findings"]:
+            if not line.startswith("events:"):  # the noise line, shown above
+                say(f"fit: {line}")
+        for line in fit["warnings"]:
+            say(f"warning: {line}")
+    for name, s in report["splits"].items():
+        say(f"{name}: events from {s['events_file']}, polarity stored as "
+            f"{s['polarity_stored_as']}")
+        if s["distortion"]:
+            k1, k2 = s["distortion"][:2]
+            say(f"{name}: radial distortion k1={k1:.4g}, k2={k2:.4g}")
+    for note in report["notes"]:
+        if "polarity stored as" not in note:  # already shown per split above
+            say(f"note: {note}")

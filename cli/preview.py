@@ -7,6 +7,8 @@ from typing import Annotated
 
 import typer
 
+from hybridneus.cli.options import SetOption
+
 
 def preview(
     data: Annotated[Path, typer.Argument(help="Dataset folder, e.g. data/real/multimeter.")],
@@ -20,10 +22,7 @@ def preview(
     background: Annotated[
         str, typer.Option("--background", help="'white' or 'black' behind the events.")
     ] = "white",
-    preset_override: Annotated[
-        list[str] | None,
-        typer.Option("--preset-override", "-o", help="Replace a preset field, key=value."),
-    ] = None,
+    set_: SetOption = None,
 ) -> None:
     """Write PNGs of event frames (red positive, blue negative) ending at evenly spaced views,
     side by side with the view's rgb frame where one is readable."""
@@ -32,15 +31,16 @@ def preview(
     import cv2
     import numpy as np
 
-    from hybridneus.data import event_frame, load_dataset, parse_override_strings
+    from hybridneus.cli.options import config_with
+    from hybridneus.data import event_frame, load_dataset
     from hybridneus.errors import ConfigError
     from hybridneus.fileio import atomic_path
 
     if background not in ("white", "black"):
         raise ConfigError(f"--background: expected 'white' or 'black', got {background!r}")
     logging.getLogger("hybridneus.data").setLevel(logging.ERROR)
-    overrides = parse_override_strings(preset_override)
-    ds = load_dataset(data, overrides=overrides or None, splits=[split])
+    cfg = config_with("fast", set_)
+    ds = load_dataset(data, overrides=cfg.data.overrides() or None, splits=[split])
     sp = ds.splits[split]
     if sp.n_views < 2:
         raise ConfigError(f"{sp.path}: preview needs at least 2 views")

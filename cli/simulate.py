@@ -23,7 +23,8 @@ class NoisePreset(str, Enum):
 def simulate(
     source: Annotated[str, typer.Argument(
         help="Mesh file (OBJ with MTL/textures, PLY, OFF, GLB) or a built-in scene: "
-             "builtin:device, builtin:thin.", show_default=False)],
+             "builtin:device, builtin:thin, or generated:KIND:SEED (KIND: box, slab, cage, "
+             "bowl, blob, rods).", show_default=False)],
     out: Annotated[Path, typer.Argument(help="Output dataset folder (replaced atomically).",
                                         show_default=False)],
     views: Annotated[int, typer.Option(help="Training views along the spiral.")] = 999,

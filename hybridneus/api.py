@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from hybridneus.config import Config, apply_overrides, preset_config
+from hybridneus.config import Config, apply_overrides, preset_config, rays_per_step, validate
 from hybridneus.errors import ConfigError, RunError
 
 
@@ -32,20 +32,8 @@ def _resolve_config(config: Config | str | None, overrides: Sequence[str]) -> Co
 
 
 def load_training_data(cfg: Config, dataset: Any = None):
-    """Load ``dataset`` (path or EventDataset) with the config's preset overrides.
-
-    With ``data.offset_from_events`` and no polarity offset stated by the path, ``scene.json``
-    or the config, the offset is the one the events' own balance implies
-    (:mod:`hybridneus.data.balance`) instead of the fallback's 0; a stated offset that the
-    events contradict gets a warning. The offset taken is written into ``cfg.data``.
-    With ``data.denoise``, events that no nearby pixel confirms are taken for sensor noise and
-    left out of the training split (:mod:`hybridneus.data.denoise`); everything after, the
-    crop and the tonemap eps included, sees the kept events.
-    With ``data.crop_from_events`` and no crop set in the config, the preset's crop is shrunk
-    to the events' visual hull (:func:`hybridneus.data.hull.event_hull_crop`); the crop taken
-    (shrunk or kept) is written into ``cfg.data``, so the run's config records it and a
-    resume reuses it instead of outlining the object again.
-    """
+    """The dataset a fit trains on (a path or an EventDataset), with ``cfg.data``'s overrides
+    of its scene preset (the caller's dataset is never changed)."""
     from hybridneus.data import EventDataset, load_dataset
     from hybridneus.data import apply_overrides as preset_overrides
 
@@ -53,160 +41,13 @@ def load_training_data(cfg: Config, dataset: Any = None):
         if cfg.data.overrides():
             import copy
 
-            dataset = copy.copy(dataset)  # never change the caller's preset
-            dataset.preset = preset_overrides(dataset.preset, cfg.data.overrides())
-        if not cfg.data.path:
-            cfg.data.path = str(dataset.root)
-    else:
-        path = dataset if dataset is not None else cfg.data.path
-        if not path:
-            raise ConfigError("data.path: no dataset given")
-        cfg.data.path = str(Path(path).resolve())
-        dataset = load_dataset(
-            path, overrides=cfg.data.overrides() or None, splits=cfg.data.split
-        )
-    estimate_offset = cfg.data.offset_from_events and cfg.data.polarity_offset is None
-    # one pass of the noise filter serves the offset estimate and data.denoise
-    denoised = _noise_filtered(cfg, dataset) if estimate_offset or cfg.data.denoise else None
-    if estimate_offset:
-        dataset = _offset_from_events(cfg, dataset, denoised)
-    if cfg.data.denoise:
-        dataset = _denoise(cfg, dataset, denoised)
-    crop_keys = ("crop_r", "crop_y_min", "crop_y_max")
-    if cfg.data.crop_from_events and all(getattr(cfg.data, k) is None for k in crop_keys):
-        dataset = _crop_from_events(cfg, dataset, crop_keys)
-    if cfg.data.eps_from_events and cfg.data.tonemap_eps is None:
-        dataset = _eps_from_events(cfg, dataset)
-    return dataset
-
-
-def _noise_filtered(cfg: Config, dataset: Any) -> tuple[Any, Any]:
-    """:func:`hybridneus.data.denoise.denoised_split` of the training split at
-    ``data.denoise_slab``: ``(kept split, report)``."""
-    from hybridneus.data.denoise import denoised_split
-
-    if not cfg.data.denoise_slab > 0:
-        raise ConfigError(f"data.denoise_slab: expected a number of views > 0, got "
-                          f"{cfg.data.denoise_slab}")
-    return denoised_split(dataset[cfg.data.split], cfg.data.denoise_slab)
-
-
-def _offset_from_events(cfg: Config, dataset: Any, denoised: tuple[Any, Any]) -> Any:
-    """``dataset`` (a copy, when the offset changes) with the polarity offset its events imply
-    (:func:`hybridneus.data.balance.polarity_balance`, on the ``denoised`` training split), if
-    nothing stated one; a stated offset is kept, with a warning when the events disagree with
-    it (:meth:`~hybridneus.data.balance.PolarityBalance.disagrees`)."""
-    import copy
-    import logging
-
-    from hybridneus.data import apply_overrides as preset_overrides
-    from hybridneus.data.balance import polarity_balance
-
-    log = logging.getLogger("hybridneus")
-    p = dataset.preset
-    balance = polarity_balance(dataset[cfg.data.split], cfg.data.denoise_slab, denoised)
-    log.info(balance.line())
-    suggested = balance.suggested()
-    if suggested is None:
-        return dataset
-    if "polarity_offset" in dataset.stated:
-        if balance.disagrees(p.polarity_offset):
-            msg = (f"polarity offset {p.polarity_offset:g} (preset from the "
-                   f"{dataset.preset_source}), but the events imply {suggested:g}; --set "
-                   f"data.polarity_offset={suggested:g} uses theirs")
-            log.warning(msg)
             dataset = copy.copy(dataset)
-            dataset.notes = [*dataset.notes, msg]
+            dataset.preset = preset_overrides(dataset.preset, cfg.data.overrides())
         return dataset
-    cfg.data.polarity_offset = suggested
-    if suggested == p.polarity_offset:
-        return dataset
-    msg = (f"polarity offset {suggested:g} from the events' balance (the preset from the "
-           f"{dataset.preset_source} guessed {p.polarity_offset:g}; "
-           "data.offset_from_events=false keeps the guess)")
-    log.info(msg)
-    dataset = copy.copy(dataset)
-    dataset.preset = preset_overrides(p, {"polarity_offset": suggested})
-    dataset.notes = [*dataset.notes, msg]
-    return dataset
-
-
-def _denoise(cfg: Config, dataset: Any, denoised: tuple[Any, Any]) -> Any:
-    """``dataset`` (a copy, when anything goes) with the training split's noise events
-    removed: the ``denoised`` split of :func:`_noise_filtered`."""
-    import copy
-    import logging
-
-    split, report = denoised
-    msg = f"{report.line()} (data.denoise)"
-    logging.getLogger("hybridneus").info(msg)
-    if split is dataset[cfg.data.split]:
-        return dataset
-    dataset = copy.copy(dataset)
-    dataset.splits = {**dataset.splits, cfg.data.split: split}
-    dataset.notes = [*dataset.notes, msg]
-    return dataset
-
-
-def _eps_from_events(cfg: Config, dataset: Any) -> Any:
-    """``dataset`` (a copy) with its preset's tonemap eps lowered to ``data.eps_max`` and,
-    where the events ask for larger log-brightness changes than that eps can render, to the
-    eps that can (:mod:`hybridneus.data.contrast`). The eps taken is written into
-    ``cfg.data`` so that a resume reuses it."""
-    import copy
-    import logging
-
-    from hybridneus.data import apply_overrides as preset_overrides
-    from hybridneus.data.contrast import event_extent, loss_eps
-
-    p = dataset.preset
-    change = event_extent(dataset[cfg.data.split], p)
-    eps, why = loss_eps(p.tonemap_eps, change, cfg.data.eps_max)
-    cfg.data.tonemap_eps = eps
-    if eps == p.tonemap_eps:
-        return dataset
-    cfg.data.eps_start = float(p.tonemap_eps)
-    dataset = copy.copy(dataset)
-    dataset.preset = preset_overrides(p, {"tonemap_eps": eps})
-    msg = (f"tonemap eps {eps:g} (preset {p.tonemap_eps:g}): {why} (data.eps_from_events=false "
-           "keeps the preset's)")
-    logging.getLogger("hybridneus").info(msg)
-    dataset.notes = [*dataset.notes, msg]
-    return dataset
-
-
-def _crop_from_events(cfg: Config, dataset: Any, crop_keys: tuple[str, ...]) -> Any:
-    """``dataset`` (a copy) with its preset's crop shrunk to the event hull, if it shrinks."""
-    import copy
-    import logging
-
-    from hybridneus.data import apply_overrides as preset_overrides
-    from hybridneus.data.hull import NOTHING_OUTLINED, event_hull_crop
-
-    p = dataset.preset
-    crop = (p.crop_r, p.crop_y_min, p.crop_y_max)
-    log = logging.getLogger("hybridneus")
-    log.info("crop: outlining the object from the events (data.crop_from_events) ...")
-    tight = event_hull_crop(dataset[cfg.data.split], crop)
-    if tight is None or all(abs(a - b) < 1e-6 for a, b in zip(tight, crop, strict=True)):
-        why = NOTHING_OUTLINED if tight is None else "it is inside the events' hull"
-        log.info(f"crop: keeping the preset's (r {p.crop_r:g}, y {p.crop_y_min:g} .. "
-                 f"{p.crop_y_max:g}): {why}")
-        # recorded all the same, so that a resume does not outline the object again
-        for key, value in zip(crop_keys, crop, strict=True):
-            setattr(cfg.data, key, float(value))
-        return dataset
-    for key, value in zip(crop_keys, tight, strict=True):
-        setattr(cfg.data, key, round(float(value), 4))
-    values = {k: getattr(cfg.data, k) for k in crop_keys}
-    dataset = copy.copy(dataset)
-    dataset.preset = preset_overrides(p, values)
-    msg = (f"crop from the events' visual hull: r {values['crop_r']}, y {values['crop_y_min']}"
-           f" .. {values['crop_y_max']} (preset: r {p.crop_r:g}, y {p.crop_y_min:g} .. "
-           f"{p.crop_y_max:g}; data.crop_from_events=false keeps the preset's)")
-    log.info(msg)
-    dataset.notes = [*dataset.notes, msg]
-    return dataset
+    path = dataset if dataset is not None else cfg.data.path
+    if not path:
+        raise ConfigError("data.path: no dataset given")
+    return load_dataset(path, overrides=cfg.data.overrides() or None, splits=cfg.data.split)
 
 
 def fit(
@@ -219,6 +60,7 @@ def fit(
     resume: str | os.PathLike | None = None,
     device: str = "auto",
     progress: bool = False,
+    started: float | None = None,
 ):
     """Train a hybrid NeuS field from an event dataset and return it.
 
@@ -246,7 +88,7 @@ def fit(
     Raises:
         ConfigError: bad config or override. DatasetError: bad dataset. RunError: bad resume.
     """
-    trainer, logger = prepare(dataset, config, overrides, out, resume, device)
+    trainer, logger = prepare(dataset, config, overrides, out, resume, device, started)
     field = trainer.fit(callbacks, logger, progress=progress)
     field.run_dir = logger.run_dir if logger is not None else None
     field.interrupted = trainer.interrupted
@@ -261,41 +103,117 @@ def prepare(
     out: str | os.PathLike | None = None,
     resume: str | os.PathLike | None = None,
     device: str = "auto",
+    started: float | None = None,
 ):
-    """Build the :class:`~hybridneus.training.trainer.Trainer` and run logger of a fit."""
+    """Build the :class:`~hybridneus.training.trainer.Trainer` and run logger of a fit.
+
+    A new fit loads the dataset, runs the estimators (:mod:`hybridneus.data.estimate`),
+    fixes the schedule's length (``train.iters``, or a ``train.minutes`` budget turned into
+    steps by :mod:`hybridneus.training.budget`) and writes the scene record
+    (:mod:`hybridneus.training.scene`); a resumed one reads that record back and estimates
+    nothing. ``started``: the ``time.perf_counter()`` at which the fit began (a budget counts
+    from there; default: now).
+    """
+    import logging
+    import time
+
+    from hybridneus import __version__
+    from hybridneus.data.estimate import estimate_scene
     from hybridneus.device import resolve_device
     from hybridneus.training import runs
     from hybridneus.training.runlog import RunLogger
+    from hybridneus.training.scene import FILENAME, SceneRecord
     from hybridneus.training.trainer import Trainer, default_scene_name
 
+    started = time.perf_counter() if started is None else started
     dev = resolve_device(device)
-    state = None
+    log = logging.getLogger("hybridneus")
     if resume is not None:
-        run_dir = Path(resume)
-        state = runs.load_checkpoint(run_dir)
-        cfg = runs.load_run_config(run_dir)
-        cfg = apply_overrides(cfg, overrides)
-        if config is not None and not isinstance(config, str | Config):
-            raise ConfigError("config: expected a Config or a preset name")
-        data = load_training_data(cfg, dataset)
-        trainer = Trainer(cfg, data, dev)
-        try:
-            trainer.load_state_dict(state)
-        except (RuntimeError, KeyError, ValueError) as exc:
-            first = (str(exc).splitlines() or [type(exc).__name__])[0]
-            raise RunError(f"{run_dir / runs.CHECKPOINT}: cannot resume ({first})") from None
-        if cfg.train.iters != state["config"]["train"]["iters"]:
-            trainer.total_steps = max(trainer.step + 1, cfg.train.iters)
-        runs_root = run_dir.parent
-        logger = RunLogger(run_dir, runs_root, resume_step=trainer.step)
-        logger.start(trainer)
-        return trainer, logger
-    cfg = _resolve_config(config, overrides)
+        return _prepare_resume(Path(resume), dataset, config, overrides, dev)
+    cfg = validate(_resolve_config(config, overrides))
+    if out is not None:
+        runs.check_runs_root(out)
     data = load_training_data(cfg, dataset)
-    trainer = Trainer(cfg, data, dev)
+    cfg.data.path = cfg.data.path or str(Path(data.root).resolve())
+    found = estimate_scene(data, cfg.estimate, cfg.data)
+    record = SceneRecord(
+        dataset=str(Path(data.root).resolve()), split=cfg.data.split,
+        preset_source=data.preset_source, preset=found.dataset.preset.to_dict(),
+        estimated=found.taken, eps_start=found.eps_start, steps=cfg.train.iters,
+        n_rays=rays_per_step(cfg, dev), device=str(dev), version=__version__,
+    )
+    trainer = Trainer(cfg, found.dataset, record, dev)
     logger = None
     if out is not None:
-        run_dir = runs.new_run_dir(out, default_scene_name(data.root))
-        logger = RunLogger(run_dir, Path(out))
+        logger = RunLogger(runs.new_run_dir(out, default_scene_name(data.root)), Path(out))
+    if cfg.train.minutes > 0:
+        _fix_budget(trainer, logger, started + 60.0 * cfg.train.minutes)
+    if logger is not None:
         logger.start(trainer)
+        log.info("run: %s (config.yaml, %s)", logger.run_dir, FILENAME)
+    for line in record.lines():
+        log.info(line)
+    return trainer, logger
+
+
+def _fix_budget(trainer, logger, end: float) -> None:
+    """Turn the time to ``end`` into the trainer's step count (recorded), and stop it at
+    ``end`` should the machine slow down. With a logger, the step-0 preview and checkpoint
+    are written first and timed, so that their share of the budget is known."""
+    import time
+
+    from hybridneus.training.budget import budget_steps
+
+    t = trainer.cfg.train
+    overhead, save = 0.0, 0.0
+    if logger is not None:
+        tick = time.perf_counter()
+        logger.checkpoint(trainer)
+        save = time.perf_counter() - tick
+        if t.checkpoint_every > 0:
+            overhead += save / t.checkpoint_every
+        if t.preview_every > 0:
+            tick = time.perf_counter()
+            logger.preview(trainer)
+            overhead += (time.perf_counter() - tick) / t.preview_every
+    # the final checkpoint and curve come after the last step
+    left = end - time.perf_counter() - 2.0 * save - 0.5
+    steps, how = budget_steps(trainer, max(left, 0.0), overhead)
+    trainer.total_steps = trainer.record.steps = steps
+    trainer.record.steps_from = how
+    trainer.deadline = end - save - 0.5
+
+
+def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequence[str], dev):
+    """A trainer that continues ``run_dir`` from its last checkpoint, on the scene record's
+    values (nothing is estimated again)."""
+    from hybridneus.data import load_dataset
+    from hybridneus.training import runs
+    from hybridneus.training.runlog import RunLogger
+    from hybridneus.training.scene import FILENAME, SceneRecord
+    from hybridneus.training.trainer import Trainer
+
+    if config is not None and not isinstance(config, str | Config):
+        raise ConfigError("config: expected a Config or a preset name")
+    state = runs.load_checkpoint(run_dir)
+    saved = runs.load_run_config(run_dir)
+    cfg = validate(apply_overrides(runs.load_run_config(run_dir), overrides))
+    if cfg.train.minutes > 0 and cfg.train.minutes != saved.train.minutes:
+        raise ConfigError("train.minutes: a resumed run keeps its schedule; give --iters to "
+                          "change its length")
+    record = SceneRecord.load(run_dir / FILENAME)
+    path = dataset if dataset is not None else record.dataset
+    data = load_dataset(path, overrides=record.preset_overrides(), splits=record.split)
+    trainer = Trainer(cfg, data, record, dev)
+    try:
+        trainer.load_state_dict(state)
+    except (RuntimeError, KeyError, ValueError) as exc:
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise RunError(f"{run_dir / runs.CHECKPOINT}: cannot resume ({first})") from None
+    if cfg.train.iters != saved.train.iters:
+        trainer.total_steps = record.steps = max(trainer.step + 1, cfg.train.iters)
+        record.steps_from = "train.iters (changed on resume)"
+    trainer.deadline = None
+    logger = RunLogger(run_dir, run_dir.parent, resume_step=trainer.step)
+    logger.start(trainer)
     return trainer, logger

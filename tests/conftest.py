@@ -23,7 +23,7 @@ TINY_FIT = [
     "render.occupancy_march=24",
     "loss.n_random_points=64",
     "train.n_rays=32",
-    "train.warmup=1",
+    "train.warmup=0.5",
     "train.log_every=1",
     "train.preview_every=0",
     "train.checkpoint_every=0",
@@ -40,6 +40,12 @@ def simulate_device(out: Path, n_views: int, width: int, height: int, revolution
                            test_views=0, revolutions=revolutions, supersample=1)
     simulate_dataset("builtin:device", out, cfg)
     return out
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory) -> Path:
+    """The built-in device scene, 40 views at 48x36 (the training tests' scene)."""
+    return simulate_device(tmp_path_factory.mktemp("data") / "device", 40, 48, 36, 1.5)
 
 
 @pytest.fixture(scope="session")

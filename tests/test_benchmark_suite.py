@@ -15,6 +15,7 @@ SUITE = Path(__file__).resolve().parents[1] / "benchmarks" / "run_suite.py"
 
 
 def _suite_module():
+    sys.path.insert(0, str(SUITE.parent))  # the benchmarks import their common module
     spec = importlib.util.spec_from_file_location("run_suite", SUITE)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -22,7 +23,8 @@ def _suite_module():
 
 
 def _run(*args: str) -> subprocess.CompletedProcess:
-    proc = subprocess.run([sys.executable, str(SUITE), *args], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, str(SUITE), *args], capture_output=True, text=True,
+                          timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return proc
 
@@ -35,15 +37,15 @@ def test_fit_only_then_score_runs_elsewhere(tiny_scene, tmp_path):
     shutil.copytree(tiny_scene / "device", cache / tag)
     sets = [a for o in TINY_FIT if not o.startswith("train.iters") for a in ("--set", o)]
     common = ["--views", "8", "--width", str(width), "--height", str(height),
-              "--test-views", "3", "--res", "24", "--curve", "2"]
+              "--test-views", "3", "--res", "24", "--curve", "2", "--allow-dirty"]
     _run("--fit-only", "--scenes", "device", "--assets", str(tmp_path / "no-assets"),
-         "--cache", str(cache), "--out-runs", str(tmp_path / "runs"), "--minutes", "0.02",
-         "--presets", "fast", "--out", str(tmp_path / "unused.jsonl"), *common, *sets)
+         "--cache", str(cache), "--out-runs", str(tmp_path / "runs"), "--iters", "6",
+         "--seeds", "3", "--presets", "fast", "--out", str(tmp_path / "unused.jsonl"),
+         *common, *sets)
     assert not (tmp_path / "unused.jsonl").exists()  # --fit-only records nothing
     (run,) = [p for p in (tmp_path / "runs").iterdir() if p.name.startswith(tag)]
-    # The end, and the middle of the budget unless one step outlasted it (a loaded machine).
     snapshots = sorted((run / "snapshots").glob("t*.pt"))
-    assert 1 <= len(snapshots) <= 2
+    assert [int(p.stem.split("-s")[1]) for p in snapshots] == [3, 6]  # halfway, the end
 
     # Another machine: the dataset path recorded there does not exist here.
     moved = tmp_path / "elsewhere" / run.name
@@ -52,47 +54,82 @@ def test_fit_only_then_score_runs_elsewhere(tiny_scene, tmp_path):
     info["dataset"] = f"/nonexistent/{tag}"
     (moved / "fit.json").write_text(json.dumps(info))
     results = tmp_path / "suite.jsonl"
-    proc = _run("--score-runs", str(moved), "--cache", str(cache), "--out", str(results),
-                "--plots", str(tmp_path / "plots"), "--res", "24", "--image-views", "1")
+    _run("--score-runs", str(moved), "--cache", str(cache), "--out", str(results),
+         "--res", "24", "--image-views", "1", "--allow-dirty")
 
     (line,) = [json.loads(x) for x in results.read_text().splitlines()]
-    assert line["device"] == "cpu" and line["scene"] == "device"
+    assert line["bench"] == "suite" and line["scene"] == "device" and line["seed"] == 3
     assert line["preset"] == " ".join(["fast", *sets[1::2]])  # a variant is named apart
-    assert line["curve"][0][:2] == [0.0, 0] and len(line["curve"]) == 1 + len(snapshots)
-    assert line["curve"][-1][1] == line["steps"] > 0
-    assert line["curve"][0][2] is not None  # the untrained sphere meshes and scores
+    assert [c[1] for c in line["curve"]] == [3, 6] and line["steps"] == 6
     assert (moved / "mesh.ply").is_file() == (line["chamfer"] is not None)
-    assert "chamfer_unfilled" in line  # scored with and without the unseen pockets filled
-    assert "| device | fast" in proc.stdout  # the report table follows the scoring
+    # scored with and without each mesh clean-up, and stamped
+    assert {"chamfer_unfilled", "chamfer_cavities", "commit", "date", "machine"} <= set(line)
+    assert line["machine"]["device"] == "cpu" and line["dirty"] is True
 
 
-def test_results_keep_devices_and_variants_apart(tmp_path):
+def test_the_generated_set_is_drawn_from_its_seed():
     suite = _suite_module()
-    base = {"scene": "s", "minutes": 2.0, "noise": [0.0, 0.0], "steps": 10, "chamfer": 0.02,
-            "fit_s": 120.0, "curve": [[0.0, 0, 0.2], [120.0, 10, 0.02]]}
-    lines = [
-        {**base, "preset": "fast", "device": "cpu"},
-        {**base, "preset": "fast", "device": "cuda", "chamfer": 0.015},
-        {**base, "preset": "fast train.n_rays=1024", "device": "cuda"},
-        {**base, "preset": "fast", "device": "cpu", "chamfer": 0.01},  # a later cpu run
-    ]
-    path = tmp_path / "r.jsonl"
-    path.write_text("".join(json.dumps(x) + "\n" for x in lines))
-    got = {(r["preset"], r["device"]): r["chamfer"] for r in suite.read_results(path)}
-    assert got == {("fast", "cpu"): 0.01, ("fast", "cuda"): 0.015,
-                   ("fast train.n_rays=1024", "cuda"): 0.02}
-    assert suite.preset_spec("fast-rgb") == ("fast", ["train.supervision=rgb"])
+    from hybridneus.simulate.generated import KINDS, generated_set
+
+    a, b = generated_set(8, 1), generated_set(8, 2)
+    assert [k for k, _ in a] == [KINDS[i % len(KINDS)] for i in range(8)]
+    assert a == generated_set(8, 1) and a != b  # fresh shapes for a fresh seed
+    assert suite.scene_name("generated:box:12") == "gen-box-12"
+    assert suite.scene_name("bunny") == "bunny"
+
+
+def test_a_dirty_tree_is_refused_unless_told(monkeypatch):
+    import argparse
+
+    import pytest
+
+    sys.path.insert(0, str(SUITE.parent))
+    import common
+
+    real = common.git_state
+    monkeypatch.setenv(common.COMMIT_VARIABLE, "def5678")  # a copy without git history
+    real.cache_clear()
+    assert real() == ("def5678", False)
+    monkeypatch.delenv(common.COMMIT_VARIABLE)
+    real.cache_clear()
+    monkeypatch.setattr(common, "git_state", lambda: ("abc1234", True))
+    with pytest.raises(SystemExit, match="uncommitted changes"):
+        common.check_tree(argparse.Namespace(allow_dirty=False))
+    common.check_tree(argparse.Namespace(allow_dirty=True))
+
+
+def test_the_report_pairs_two_commits_and_leaves_dirty_lines_out(tmp_path, monkeypatch):
+    sys.path.insert(0, str(SUITE.parent))
+    import common
+    import report
+
+    def line(commit, scene, seed, cd, dirty=False):
+        return {"bench": "suite", "commit": commit, "dirty": dirty, "scene": scene, "seed": seed,
+                "preset": "fast", "minutes": 15.0, "chamfer": cd, "fscore": 0.5, "steps": 9000,
+                "fit_wall_s": 905.0, "date": "2026-11-26T10:00:00+00:00", "threads": 2,
+                "machine": {"cpu": "cpu x"}, "command": "python benchmarks/run_suite.py"}
+
+    lines = [line("aaa", "bunny", 0, 0.012), line("aaa", "bunny", 1, 0.014),
+             line("bbb", "bunny", 0, 0.011), line("bbb", "bunny", 1, 0.013),
+             line("bbb", "gen-box-3", 0, 0.02), line("ccc", "bunny", 0, 0.5, dirty=True)]
+    monkeypatch.setattr(common, "RESULTS", tmp_path)
+    (tmp_path / "suite.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    text = report.build([("aaa", "bbb")])
+    assert "| bunny | fast | 15 min | 2 | 0.0130 | 0.0120-0.0140 | 0.0120 |" in text
+    assert "-7.7%" in text and "commit ccc" not in text and "0.5000" not in text
+    assert "| gen-box-3 | 1 | 0.0200 |" in text
 
 
 def test_gpu_pack_carries_what_a_fit_reads_and_unpacks_returned_runs(tiny_scene, tmp_path):
     """benchmarks/gpu_pack.py: the packed copy loads as the same dataset (events identical,
-    compressed, no frames); the flat files a GPU session returns become a run folder again."""
+    compressed, no frames); the flat files a GPU check returns become a run folder again."""
     import tarfile
 
     import numpy as np
 
     from hybridneus.data import load_dataset
 
+    sys.path.insert(0, str(SUITE.parent))
     spec = importlib.util.spec_from_file_location("gpu_pack", SUITE.parent / "gpu_pack.py")
     gpu_pack = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(gpu_pack)
@@ -110,10 +147,10 @@ def test_gpu_pack_carries_what_a_fit_reads_and_unpacks_returned_runs(tiny_scene,
     flat.mkdir()
     small = tmp_path / "small"
     small.mkdir()
-    for name in ("fit.json", "config.yaml", "metrics.csv"):
+    for name in ("fit.json", "config.yaml", "scene.yaml", "metrics.csv"):
         (small / name).write_text(name)
     with tarfile.open(flat / "scene-1.tar", "w") as tar:
-        for name in ("fit.json", "config.yaml", "metrics.csv"):
+        for name in ("fit.json", "config.yaml", "scene.yaml", "metrics.csv"):
             tar.add(small / name, arcname=name)
     (flat / "scene-1.t00060.0-s9.pt").write_bytes(b"snapshot")
     (run,) = gpu_pack.unpack(flat, tmp_path / "runs")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -13,7 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_data_builder import H, W, random_events, write_split  # noqa: E402
 
-SIZE_ARGS = ["--preset-override", f"width={W}", "--preset-override", f"height={H}"]
+SIZE_ARGS = ["--set", f"data.width={W}", "--set", f"data.height={H}"]
 
 
 @pytest.fixture
@@ -26,37 +27,56 @@ def scene(tmp_path) -> Path:
     return root
 
 
-def test_info_table(run_cli, scene):
+def _info(run_cli, *args: str) -> dict:
+    code, out, err = run_cli("info", *args, "--json")
+    assert code == 0, err
+    return json.loads(out)
+
+
+def test_info_json(run_cli, scene):
+    report = _info(run_cli, str(scene), *SIZE_ARGS)
+    assert set(report["splits"]) == {"train", "test"}
+    train = report["splits"]["train"]
+    assert (train["views"], train["events"], train["width"], train["height"]) == (6, 400, W, H)
+    assert train["polarity_stored_as"] == "0/1 (converted to -1/+1)"
+    assert report["splits"]["test"]["rgb_frames"] == 0
+    assert report["preset_source"].startswith("path (real/multimeter)")
+    assert report["preset"]["polarity_offset"] == -0.406
+    fit = report["fit"]
+    # the real group's eps (1e-5) is below the cap, and random events ask for little
+    assert fit["preset"]["tonemap_eps"] == 1e-5 and "tonemap_eps" not in fit["estimated"]
+    # 400 events spread over 24x16 pixels: noise, and too dense to filter
+    assert "the noise is too dense" in fit["noise"]
+    # 400 events over 384 pixels: no pixel busy enough to say what the polarity offset is
+    assert fit["polarity_balance"] is None and fit["preset"]["polarity_offset"] == -0.406
+
+
+def test_info_table_says_the_same(run_cli, scene):
     code, out, err = run_cli("info", str(scene), *SIZE_ARGS)
     assert code == 0, err
-    assert "train" in out and "test" in out
-    assert "400" in out and "absent" in out
-    assert f"{W}x{H}" in out
-    assert "preset source: path (real/multimeter)" in out
-    assert "-0.406" in out
-    assert "0/1 (converted to -1/+1)" in out
-    # the real group's eps (1e-5) is below the cap, and random events ask for little
-    assert "fit: tonemap eps 1e-05, the preset's" in out
-    # 400 events spread over 24x16 pixels: noise, and too dense to filter
-    assert "noise: events: the noise is too dense" in out and "(data.denoise, off" in out
-    # 400 events over 384 pixels: no pixel busy enough to say what the polarity offset is
-    assert "polarity: too few pixels" in out and "a fit keeps the preset's -0.406" in out
+    assert "train" in out and "test" in out and f"{W}x{H}" in out
+    assert "preset source: path (real/multimeter)" in out and "-0.406" in out
+    assert "fit: polarity: too few pixels" in out
 
 
-def test_info_override_and_split(run_cli, scene):
-    code, out, _ = run_cli("info", str(scene), *SIZE_ARGS,
-                        "-o", "threshold=0.2", "--split", "test")
-    assert code == 0
-    assert "threshold=0.2" in out and "│ train" not in out
+def test_info_set_and_split(run_cli, scene):
+    report = _info(run_cli, str(scene), *SIZE_ARGS, "--set", "data.threshold=0.2",
+                   "--split", "test")
+    assert report["preset"]["threshold"] == 0.2 and "threshold" in report["stated"]
+    assert set(report["splits"]) == {"test"} and "fit" not in report
 
 
-def test_info_fallback_is_reported(run_cli, tmp_path):
+def test_info_fallback_and_estimates(run_cli, tmp_path):
     root = tmp_path / "captures" / "thing"
     write_split(root / "train", n_views=3)
-    code, out, _ = run_cli("info", str(root), *SIZE_ARGS)
-    assert code == 0
-    assert "custom" in out and "fallback" in out
-    assert "fit: tonemap eps 0.001, capped at data.eps_max 0.001" in out  # not the nerf 0.1
+    report = _info(run_cli, str(root), *SIZE_ARGS)
+    assert report["preset"]["group"] == "custom" and "fallback" in report["preset_source"]
+    # not the nerf group's 0.1: the fit caps it
+    assert report["fit"]["preset"]["tonemap_eps"] == 0.001
+    assert "capped at estimate.eps_max 0.001" in report["fit"]["estimated"]["tonemap_eps"]
+    assert report["fit"]["eps_start"] == 0.1
+    off = _info(run_cli, str(root), *SIZE_ARGS, "--set", "estimate.tonemap_eps=false")
+    assert off["fit"]["preset"]["tonemap_eps"] == 0.1
 
 
 def test_info_broken_dataset_exit_2(run_cli, scene):
@@ -68,9 +88,11 @@ def test_info_broken_dataset_exit_2(run_cli, scene):
     assert len(lines) == 1 and lines[0].startswith("error: ") and str(bad) in lines[0]
 
 
-def test_info_bad_override_exit_2(run_cli, scene):
-    code, _, err = run_cli("info", str(scene), "-o", "thresh=1")
-    assert code == 2 and err.strip().startswith("error: thresh: unknown preset key")
+def test_info_bad_set_exit_2(run_cli, scene):
+    code, _, err = run_cli("info", str(scene), "--set", "data.thresh=1")
+    assert code == 2 and err.strip().startswith("error: data.thresh: unknown key 'thresh'")
+    code, _, err = run_cli("info", str(scene), "-o", "threshold=1")
+    assert code == 2  # the old option is gone: one override syntax everywhere
 
 
 def test_preview_writes_pngs(run_cli, scene, tmp_path):

@@ -137,42 +137,47 @@ def _config(*overrides: str):
     from hybridneus.config import apply_overrides, preset_config
 
     # the crop from the events is not what these tests are about, and it takes the time
-    return apply_overrides(preset_config("fast"), ["data.crop_from_events=false", *overrides])
+    return apply_overrides(preset_config("fast"), ["estimate.crop=false", *overrides])
+
+
+def _estimated(cfg, root):
+    """The dataset a fit of ``root`` with ``cfg`` trains on: read, then estimated."""
+    from hybridneus.api import load_training_data
+    from hybridneus.data.estimate import estimate_scene
+
+    return estimate_scene(load_training_data(cfg, root), cfg.estimate, cfg.data)
 
 
 def test_a_fit_takes_the_offset_from_the_events_when_nothing_states_one(lopsided):
-    from hybridneus.api import load_training_data
     from hybridneus.data import load_dataset
 
     custom, real = lopsided
     assert load_dataset(custom).preset.polarity_offset == 0.0  # the fallback's
     cfg = _config()
-    data = load_training_data(cfg, custom)
-    assert data.preset.polarity_offset == pytest.approx(-0.4, abs=0.05)
-    assert cfg.data.polarity_offset == data.preset.polarity_offset  # a resume reuses it
-    assert any("from the events' balance" in note for note in data.notes)
+    found = _estimated(cfg, custom)
+    assert found.dataset.preset.polarity_offset == pytest.approx(-0.4, abs=0.05)
+    assert cfg.data.polarity_offset is None  # the config is not written to
+    assert "from the events' balance" in found.taken["polarity_offset"]
     # an unpublished scene of the real group: the group's -0.404 is a guess, replaced too
-    data = load_training_data(_config(), real)
+    data = _estimated(_config(), real).dataset
     assert data.preset.group == "real"
     assert data.preset.polarity_offset == pytest.approx(-0.4, abs=0.05)
     assert data.preset.polarity_offset != -0.404
     # off: the fallback's 0 stays
-    off = _config("data.offset_from_events=false")
-    assert load_training_data(off, custom).preset.polarity_offset == 0.0
+    off = _config("estimate.polarity_offset=false")
+    assert _estimated(off, custom).dataset.preset.polarity_offset == 0.0
     # the config states one: it is kept
     given = _config("data.polarity_offset=-0.1")
-    assert load_training_data(given, custom).preset.polarity_offset == -0.1
+    assert _estimated(given, custom).dataset.preset.polarity_offset == -0.1
 
 
 def test_a_stated_offset_is_kept_with_a_warning_when_the_events_disagree(lopsided, tmp_path,
                                                                           caplog):
-    from hybridneus.api import load_training_data
-
     custom, _ = lopsided
     published = tmp_path / "nerf" / "lego"  # a published scene: its preset states 0
     shutil.copytree(custom, published)
     with caplog.at_level("WARNING", logger="hybridneus"):
-        data = load_training_data(_config(), published)
-    assert data.preset.polarity_offset == 0.0
+        found = _estimated(_config(), published)
+    assert found.dataset.preset.polarity_offset == 0.0
     assert any("but the events imply -0." in r.getMessage() for r in caplog.records)
-    assert any("--set data.polarity_offset=" in note for note in data.notes)
+    assert any("--set data.polarity_offset=" in w for w in found.warnings)

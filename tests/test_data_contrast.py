@@ -1,4 +1,4 @@
-"""The tonemap eps of the loss: at most data.eps_max, and lower where the events need it."""
+"""The tonemap eps of the loss: at most estimate.eps_max, and lower where the events need it."""
 
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def test_extent_is_threshold_times_the_window_count(scene):
 
 
 def test_loss_eps_takes_the_lowest_bound_and_says_which():
-    assert loss_eps(0.1, 1.0, 1e-3) == (1e-3, "capped at data.eps_max 0.001")
+    assert loss_eps(0.1, 1.0, 1e-3) == (1e-3, "capped at estimate.eps_max 0.001")
     eps, why = loss_eps(0.1, 7.5, 1e-3)
     assert eps == float(f"{reachable_eps(7.5):.2g}") and "up to 7.50" in why
     assert loss_eps(1e-5, 7.5, 1e-3)[0] == 1e-5  # a preset below both is kept
@@ -66,62 +66,66 @@ def test_reachable_eps_gives_the_range_asked_for():
     assert reachable_eps(1.0, margin=1.0) > reachable_eps(1.0, margin=2.0)
 
 
-def test_fit_lowers_eps_to_the_cap_and_further_where_the_events_need_it(scene):
+def _estimated(cfg, root):
     from hybridneus.api import load_training_data
+    from hybridneus.data.estimate import estimate_scene
+
+    return estimate_scene(load_training_data(cfg, root), cfg.estimate, cfg.data)
+
+
+def _config(*overrides: str):
     from hybridneus.config import apply_overrides, preset_config
 
+    return apply_overrides(preset_config("fast"), ["estimate.crop=false", *overrides])
+
+
+def test_fit_lowers_eps_to_the_cap_and_further_where_the_events_need_it(scene):
     dark = scene(30)  # 7.5 log units: beyond what eps = 0.1 (+-2.4) or 0.001 (+-6.9) renders
-    cfg = preset_config("fast")
-    data = load_training_data(cfg, dark)
-    eps = data.preset.tonemap_eps
-    assert eps == cfg.data.tonemap_eps  # recorded, so that a resume keeps it
+    found = _estimated(_config(), dark)
+    eps = found.dataset.preset.tonemap_eps
     assert math.log1p(1 / eps) >= 7.5 and 1e-5 < eps < 1e-3
-    assert any("up to 7.50 in one window" in note for note in data.notes)
-    assert cfg.data.eps_start == 0.1  # training eases in from the preset's eps
+    assert "up to 7.50 in one window" in found.taken["tonemap_eps"]
+    assert found.eps_start == 0.1  # training eases in from the preset's eps
 
     faint = scene(4)  # 1.0 log units: within range, only the cap applies
-    cfg = preset_config("fast")
-    data = load_training_data(cfg, faint)
-    assert data.preset.tonemap_eps == cfg.data.tonemap_eps == 1e-3
-    assert any("data.eps_max 0.001" in note for note in data.notes)
-    cfg = apply_overrides(preset_config("fast"), ["data.eps_max=0"])  # no cap: preset kept
-    assert load_training_data(cfg, faint).preset.tonemap_eps == 0.1
-    cfg = apply_overrides(preset_config("fast"), ["data.eps_max=0"])
-    assert 1e-5 < load_training_data(cfg, dark).preset.tonemap_eps < 1e-3  # need alone
+    found = _estimated(_config(), faint)
+    assert found.dataset.preset.tonemap_eps == 1e-3
+    assert "estimate.eps_max 0.001" in found.taken["tonemap_eps"]
+    nocap = _config("estimate.eps_max=0")  # no cap: the preset's is kept
+    assert _estimated(nocap, faint).dataset.preset.tonemap_eps == 0.1
+    assert 1e-5 < _estimated(nocap, dark).dataset.preset.tonemap_eps < 1e-3  # need alone
 
-    cfg = apply_overrides(preset_config("fast"), ["data.eps_from_events=false"])
-    assert load_training_data(cfg, dark).preset.tonemap_eps == 0.1
-    cfg = apply_overrides(preset_config("fast"), ["data.tonemap_eps=0.05"])  # the user's wins
-    assert load_training_data(cfg, dark).preset.tonemap_eps == 0.05
+    off = _config("estimate.tonemap_eps=false")
+    assert _estimated(off, dark).dataset.preset.tonemap_eps == 0.1
+    given = _config("data.tonemap_eps=0.05")  # the user's wins
+    assert _estimated(given, dark).dataset.preset.tonemap_eps == 0.05
 
 
 def test_a_preset_eps_below_the_cap_is_kept(scene):
-    from hybridneus.api import load_training_data
-    from hybridneus.config import apply_overrides, preset_config
-
-    cfg = apply_overrides(preset_config("fast"), ["data.eps_max=0.001"])
     root = scene(4)
     (root / "scene.json").write_text('{"preset": {"tonemap_eps": 1e-5}}')  # the real groups'
-    assert load_training_data(cfg, root).preset.tonemap_eps == 1e-5
-    assert cfg.data.tonemap_eps == 1e-5
-    assert cfg.data.eps_start is None  # nothing lowered, nothing to ease in
+    found = _estimated(_config(), root)
+    assert found.dataset.preset.tonemap_eps == 1e-5
+    assert "tonemap_eps" not in found.taken
+    assert found.eps_start is None  # nothing lowered, nothing to ease in
 
 
-def test_training_eases_eps_from_the_preset_into_the_lowered_one():
-    from types import SimpleNamespace
+def test_training_eases_eps_from_the_preset_into_the_lowered_one(scene):
+    import sys
 
-    from hybridneus.config import preset_config
-    from hybridneus.training.trainer import Trainer
+    from hybridneus.api import prepare
 
-    cfg = preset_config("fast")
-    cfg.data.eps_start, cfg.data.eps_anneal_steps = 0.1, 500
-    t = SimpleNamespace(cfg=cfg, scene={"tonemap_eps": 0.001}, step=0)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from fitting import tiny
+
+    root = scene(30)
+    trainer, _ = prepare(root, tiny("train.iters=100", "estimate.eps_ease=0.5",
+                                    "estimate.crop=false"), device="cpu")
+    end = trainer.scene["tonemap_eps"]
+    assert trainer.record.eps_start == 0.1 and end < 1e-3
     at = {}
-    for step in (0, 250, 500, 5000):
-        t.step = step
-        at[step] = Trainer.tonemap_eps(t)
-    assert at[0] == pytest.approx(0.1) and at[250] == pytest.approx(0.01)  # geometric
-    assert at[500] == at[5000] == 0.001
-    cfg.data.eps_start = None  # not lowered: the scene's eps from the first step
-    t.step = 0
-    assert Trainer.tonemap_eps(t) == 0.001
+    for step in (0, 25, 50, 90):
+        trainer.step = step
+        at[step] = trainer.tonemap_eps()
+    assert at[0] == pytest.approx(0.1) and at[25] == pytest.approx(math.sqrt(0.1 * end))
+    assert at[50] == at[90] == end

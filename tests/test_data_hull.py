@@ -256,28 +256,24 @@ def _without_crop(scene, tmp_path):
     return loose
 
 
-def test_fit_config_records_the_event_crop_unless_a_crop_is_set(scene, tmp_path):
+def test_the_crop_estimate_shrinks_the_crop_unless_one_is_set(scene, tmp_path):
     from hybridneus.api import load_training_data
     from hybridneus.config import apply_overrides, preset_config
+    from hybridneus.data.estimate import estimate_scene
 
     loose = _without_crop(scene, tmp_path)
 
-    cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=true",
-                                                  "data.crop_y_min=-0.9"])
-    data = load_training_data(cfg, loose)
-    assert (cfg.data.crop_r, data.preset.crop_r) == (None, 1.0)  # the user's crop wins
-    cfg = apply_overrides(preset_config("fast"), ["data.crop_from_events=false"])
-    assert load_training_data(cfg, loose).preset.crop_r == 1.0
-    cfg = preset_config("fast")  # on by default
-    data = load_training_data(cfg, loose)
-    assert cfg.data.crop_r is not None and data.preset.crop_r == cfg.data.crop_r < 0.8
-    assert data.preset.crop_y_min == cfg.data.crop_y_min > -1.0
-    assert any("visual hull" in note for note in data.notes)
-    # a crop the hull does not shrink is recorded too, so a resume need not outline again
-    cfg = preset_config("fast")
-    kept = load_training_data(cfg, scene).preset
-    assert (cfg.data.crop_r, cfg.data.crop_y_min, cfg.data.crop_y_max) == (
-        kept.crop_r, kept.crop_y_min, kept.crop_y_max)
+    def estimated(*overrides):
+        cfg = apply_overrides(preset_config("fast"), list(overrides))
+        return estimate_scene(load_training_data(cfg, loose), cfg.estimate, cfg.data)
+
+    assert estimated("data.crop_y_min=-0.9").dataset.preset.crop_r == 1.0  # the user's wins
+    assert estimated("estimate.crop=false").dataset.preset.crop_r == 1.0
+    found = estimated()  # on by default
+    p = found.dataset.preset
+    assert p.crop_r < 0.8 and p.crop_y_min > -1.0
+    assert {"crop_r", "crop_y_min", "crop_y_max"} <= set(found.taken)
+    assert "visual hull" in found.taken["crop_r"]
 
 
 def test_cli_fit_says_which_crop_it_took(scene, tmp_path):
@@ -291,4 +287,4 @@ def test_cli_fit_says_which_crop_it_took(scene, tmp_path):
         capture_output=True, text=True, timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    assert "crop from the events' visual hull: r 0." in proc.stderr
+    assert "from the events' visual hull (preset: r 1," in proc.stderr

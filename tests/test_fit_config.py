@@ -15,6 +15,7 @@ from hybridneus.config import (
     preset_config,
     rays_per_step,
     save_config,
+    validate,
 )
 from hybridneus.errors import ConfigError
 
@@ -24,9 +25,10 @@ def test_presets_differ_where_documented():
     assert fast.grid.kind == "hash" and paper.grid.kind == "frequency"
     assert quality.train.iters > fast.train.iters
     assert paper.field.sdf_layers == 8 and paper.field.sdf_skip == [4]
-    # curvature is on and fades by default; the paper's preset never has it
-    assert 0 < fast.loss.curvature_end < 1
-    assert paper.loss.lambda_curvature == 0 and paper.loss.lambda_hull == 0
+    # curvature is on and fades by default; the paper's preset has neither it nor the hull
+    assert fast.priors.curvature.enabled and 0 < fast.priors.curvature.end < 1
+    assert not paper.priors.curvature.enabled and not paper.priors.hull.enabled
+    assert not paper.priors.sharpness_floor.enabled
     with pytest.raises(ConfigError, match="unknown preset"):
         preset_config("fastest")
 
@@ -39,7 +41,7 @@ def test_pixels_per_step_default_to_the_device():
     assert rays_per_step(preset_config("quality"), "cuda") == 512  # a preset's own count
     assert rays_per_step(apply_overrides(fast, ["train.n_rays=64"]), "cuda") == 64
     with pytest.raises(ConfigError, match="train.n_rays: expected >= 0"):
-        rays_per_step(apply_overrides(preset_config("fast"), ["train.n_rays=-5"]), "cpu")
+        validate(apply_overrides(preset_config("fast"), ["train.n_rays=-5"]))
 
 
 def test_overrides_are_typed():
@@ -74,6 +76,46 @@ def test_bad_overrides_raise_one_line_errors(item, message):
     assert "\n" not in str(info.value)
 
 
+@pytest.mark.parametrize(
+    ("item", "message"),
+    [
+        ("train.iters=-5", "train.iters: expected >= 1, got -5"),
+        ("train.minutes=-3", "train.minutes: expected >= 0"),
+        ("train.lr=-1", "train.lr: expected > 0"),
+        ("train.warmup=50", "train.warmup: expected a fraction of training"),
+        ("train.supervision=frames", "train.supervision: expected 'events' or 'rgb'"),
+        ("loss.lambda_eikonal=-0.1", "loss.lambda_eikonal: expected a weight >= 0"),
+        ("priors.hull.weight=-1", "priors.hull.weight: expected a weight >= 0"),
+        ("priors.curvature.end=2", "priors.curvature.end: expected a fraction"),
+        ("priors.collapse_guard.lr_factor=0", "priors.collapse_guard.lr_factor: expected in"),
+    ],
+)
+def test_values_out_of_range_are_config_errors(item, message):
+    cfg = apply_overrides(preset_config("fast"), [item])  # the type is right
+    with pytest.raises(ConfigError) as info:
+        validate(cfg)
+    assert message in str(info.value) and "\n" not in str(info.value)
+    for name in ("fast", "quality", "eventneus"):
+        validate(preset_config(name))
+
+
+def test_keys_of_hybridneus_0_1_name_their_successor(tmp_path):
+    with pytest.raises(ConfigError, match=r"loss.lambda_hull: unknown key \(now priors.hull"):
+        apply_overrides(Config(), ["loss.lambda_hull=1"])
+    with pytest.raises(ConfigError, match="data.denoise: unknown key .removed in hybridneus"):
+        apply_overrides(Config(), ["data.denoise=true"])
+    # a 0.1 run's config.yaml still loads: moved keys move, gone ones are dropped
+    old = ("preset: fast\nloss:\n  lambda_hull: 0.0\n  lambda_curvature: 0.1\n"
+           "  hull_ramp: 300\ntrain:\n  warmup: 50\n  inv_s_floor: 150.0\n"
+           "  collapse_window: 10\ndata:\n  crop_from_events: false\n  crop_r: 0.3\n")
+    (tmp_path / "old.yaml").write_text(old)
+    cfg = load_config(tmp_path / "old.yaml")
+    assert not cfg.priors.hull.enabled and cfg.priors.curvature.weight == 0.1
+    assert cfg.priors.sharpness_floor.floor == 150.0 and cfg.priors.collapse_guard.window == 10
+    assert cfg.train.warmup == preset_config("fast").train.warmup  # steps: dropped
+    assert cfg.estimate.crop is False and cfg.data.crop_r == 0.3
+
+
 def test_yaml_round_trip_and_bad_yaml(tmp_path):
     cfg = apply_overrides(preset_config("eventneus"), ["train.seed=7", "data.crop_r=0.3"])
     save_config(cfg, tmp_path / "c.yaml")
@@ -87,16 +129,20 @@ def test_yaml_round_trip_and_bad_yaml(tmp_path):
 def test_config_table_lists_every_key():
     rows = config_table()
     keys = {r[0] for r in rows}
-    assert {"train.lr", "loss.lambda_eikonal", "render.n_coarse", "data.threshold"} <= keys
+    assert {"train.lr", "loss.lambda_eikonal", "render.n_coarse", "data.threshold",
+            "priors.hull.enabled", "priors.collapse_guard.window", "estimate.crop"} <= keys
     assert all(r[3] for r in rows if r[0] != "preset"), "every key has a comment"
 
 
-def test_docs_table_lists_every_key():
+def test_docs_table_is_the_generated_one():
     from pathlib import Path
 
+    from hybridneus.config import config_markdown
+
     text = (Path(__file__).parents[1] / "docs" / "training.md").read_text()
-    missing = [key for key, *_ in config_table() if f"| `{key}` |" not in text]
-    assert not missing, f"docs/training.md lacks rows for {missing}"
+    start = "<!-- config table: python -m hybridneus.config.table -->\n"
+    block = text.split(start, 1)[1].split("<!-- end of config table -->", 1)[0]
+    assert block == config_markdown(), "rerun python -m hybridneus.config.table"
 
 
 def test_cli_bad_config_exits_2_with_one_line(tmp_path):

@@ -143,31 +143,9 @@ def test_learned_background_is_a_parameter():
     assert torch.allclose(f.background(), torch.full((3,), 159 / 255), atol=1e-4)
 
 
-@pytest.mark.parametrize("background", [(159 / 255,) * 3, (0.2, 0.8, 0.5)])
-@pytest.mark.parametrize("distance", [0.5, 0.3])
-def test_contrast_color_init_starts_the_distance_away_from_the_background(background, distance):
-    f = small_field(background, color_init="contrast", color_init_distance=distance)
-    pts = torch.rand(500, 3) * 0.6 - 0.3
-    dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
-    with torch.no_grad():
-        c = f.color(pts, dirs)
-    gap = (c - torch.tensor(background)).abs()
-    # The untrained head adds small terms to its output bias.
-    assert gap.min() > distance - 0.05 and gap.max() < distance + 0.05
-
-
-def test_grey_color_init_starts_at_the_sigmoid_midpoint():
+def test_the_untrained_colour_starts_at_the_sigmoid_midpoint():
     grey = small_field()
     pts = torch.rand(500, 3) * 0.6 - 0.3
     dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
     with torch.no_grad():
         assert (grey.color(pts, dirs) - 0.5).abs().max() < 0.05
-
-
-def test_unknown_color_init_is_a_config_error():
-    from hybridneus.errors import ConfigError
-
-    with pytest.raises(ConfigError, match="field.color_init"):
-        small_field(color_init="black")
-    with pytest.raises(ConfigError, match="field.color_init_distance"):
-        small_field(color_init="contrast", color_init_distance=1.5)

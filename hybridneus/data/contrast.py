@@ -87,9 +87,9 @@ def loss_eps(preset_eps: float, change: float | None, eps_max: float = 1e-3) -> 
     need = reachable_eps(change) if change else math.inf
     cap = min(need, eps_max) if eps_max > 0 else need
     if cap >= preset_eps:
-        return float(preset_eps), "the preset's (within data.eps_max and what the events need)"
+        return float(preset_eps), "the preset's (within estimate.eps_max and what the events need)"
     if need <= cap:
         why = f"the events ask for log-brightness changes up to {change:.2f} in one window"
     else:
-        why = f"capped at data.eps_max {eps_max:g}"
+        why = f"capped at estimate.eps_max {eps_max:g}"
     return float(f"{cap:.2g}"), why

@@ -99,7 +99,7 @@ class EventDataset:
         notes: messages worth showing to the user (polarity conversion, size checks).
         stated: the preset fields that the path, ``scene.json``, the caller or an override
             gave; the others are the fallback's ``nerf`` values, which a fit may replace with
-            estimates from the events (``data.offset_from_events``).
+            estimates from the events (``estimate.polarity_offset``).
     """
 
     root: Path

@@ -16,12 +16,10 @@ which ``rho`` follows. The bar is the least company that leaves noise of at most
 dense that no event is alone cannot be measured that way; it shows as events everywhere,
 even in the quietest quarter of the image, and then the stream is kept whole too.
 
-Training with ``data.denoise`` (off by default: it did not make the fits it was measured
-on better, see docs/data.md) sums only the kept events (:func:`denoised_split`) into its
-windows' targets, so that noise is not taken for a brightness change; its rays still go
-wherever any event fired (:class:`hybridneus.data.windows.EventWindowSampler`), where the
-removed ones now say that nothing changed. Noise right beside the object's moving outline
-has company and stays.
+The polarity-offset estimate (:mod:`hybridneus.data.balance`) counts only the kept events,
+so that balanced noise does not pull it towards 0; ``hybridneus info`` prints the report.
+Training uses every event. Noise right beside the object's moving outline has company and
+stays.
 """
 
 from __future__ import annotations
@@ -244,7 +242,7 @@ def denoised_split(split: SplitData, slab_views: float = 2.0) -> tuple[SplitData
 
 def kept_events(events: EventStream, keep: np.ndarray) -> EventStream:
     """The events where ``keep`` is True, as a stream whose views stay where the file put
-    them (``t_end``) and that knows what it was filtered from (``unfiltered``)."""
+    them (``t_end``)."""
     return EventStream(events.x[keep], events.y[keep], events.t[keep], events.p[keep],
                        path=events.path, polarity_note=events.polarity_note,
-                       t_end=events.t_max, unfiltered=events)
+                       t_end=events.t_max)

@@ -36,8 +36,6 @@ class EventStream:
         polarity_note: how polarity was stored, e.g. ``"0/1 (converted to -1/+1)"``.
         t_end: the capture's last timestamp when it is not the last event's (a filtered
             stream keeps its views where the file put them); ``None``: ``t[-1]``.
-        unfiltered: the stream this one was filtered from (:mod:`hybridneus.data.denoise`),
-            or ``None``.
     """
 
     x: np.ndarray
@@ -47,7 +45,6 @@ class EventStream:
     path: Path | None = None
     polarity_note: str = "-1/+1"
     t_end: float | None = None
-    unfiltered: EventStream | None = field(default=None, repr=False)
     _pixel_code: np.ndarray | None = field(default=None, repr=False)
     _code_width: int = field(default=0, repr=False)
     # Derived structures built on first use (e.g. the window counter of data.windows).

@@ -18,7 +18,6 @@ for long slices, from cumulative count images stored every ``M`` events plus two
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, fields
 from typing import Literal
 
@@ -236,10 +235,6 @@ class EventWindowSampler:
         self.per_load_len = self.rng.integers(1, preset.max_window + 1, size=self.n_views)
         first = 0 if preset.cyclic else 1
         self.views = np.arange(first, self.n_views)
-        # A filtered stream's removed events (sensor noise) are no brightness change, but
-        # rays still go where they fired: there the field learns that nothing changes.
-        raw = split.events.unfiltered
-        self._fired = None if raw is None else dataclasses.replace(split, events=raw)
 
     def draw_window(self) -> tuple[int, float, float]:
         """Pick a view and a window: ``(view1, t0, t1)`` (``t0 < 0`` means it wraps)."""
@@ -266,13 +261,10 @@ class EventWindowSampler:
         c2w = interpolate_pose(self.split.c2w[a], self.split.c2w[b], w)
         return c2w, int(round(s))
 
-    def pick_pixels(
-        self, frame: np.ndarray, n_rays: int, fired: np.ndarray | None = None
-    ) -> np.ndarray:
-        """(n_rays, 2) int64 pixels (column, row): ``1 - neg_ratio`` of them from E != 0
-        (or from where ``fired`` is nonzero, when given)."""
+    def pick_pixels(self, frame: np.ndarray, n_rays: int) -> np.ndarray:
+        """(n_rays, 2) int64 pixels (column, row): ``1 - neg_ratio`` of them from E != 0."""
         h, w = frame.shape
-        active = np.flatnonzero((frame if fired is None else fired).reshape(-1))
+        active = np.flatnonzero(frame.reshape(-1))
         n_pos = int(round((1.0 - self.preset.neg_ratio) * n_rays)) if active.size else 0
         idx = np.empty(n_rays, dtype=np.int64)
         idx[:n_pos] = active[self.rng.integers(0, active.size, size=n_pos)]
@@ -287,9 +279,7 @@ class EventWindowSampler:
         """
         i, t0, t1 = self.draw_window()
         frame = self.frame(t0, t1)
-        fired = None if self._fired is None else event_frame(
-            self._fired, t0, t1, self.preset.polarity_offset)
-        xy = self.pick_pixels(frame, n_rays, fired)
+        xy = self.pick_pixels(frame, n_rays)
         t0_wrapped = t0 + self.t_max if t0 < 0 else t0
         c2w0, k0 = self.pose_at(t0_wrapped)
         sp = self.split

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from hybridneus.meshing.volume import Bounds, VoxelGrid
+from hybridneus.meshing.volume import Bounds, VoxelGrid, evaluate_sdf
 from hybridneus.model.protocol import Field, as_points
 
 
@@ -141,7 +141,6 @@ def unseen_space(
     """
     from scipy import ndimage
 
-    from hybridneus.meshing.extract import evaluate_sdf
 
     cameras = np.asarray(cameras, dtype=np.float64).reshape(-1, 3)
     if len(cameras) == 0 or not np.isfinite(cameras).all():

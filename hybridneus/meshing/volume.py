@@ -1,4 +1,5 @@
-"""The sampling volume of mesh extraction: world-space bounds, crop cylinder and voxel grid."""
+"""The sampling volume of mesh extraction: world-space bounds, crop cylinder, voxel grid, and
+the chunked SDF queries over it."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import torch
+
+from hybridneus.model.protocol import Field
 
 Bounds = tuple[tuple[float, float, float], tuple[float, float, float]]
 
@@ -120,3 +124,18 @@ class VoxelGrid:
     def to_world(self, index_coords: np.ndarray) -> np.ndarray:
         """World coordinates (n_points, 3) float64 of continuous grid coordinates."""
         return self.origin + self.voxel * np.asarray(index_coords, dtype=np.float64)
+
+
+def evaluate_sdf(field_: Field, points: np.ndarray, chunk: int = 2**18) -> np.ndarray:
+    """Query ``field_.sdf`` at ``points`` (n_points, 3) in chunks -> (n_points,) float32.
+
+    Note:
+        Runs under ``torch.no_grad()``; values are copied back to the CPU chunk by chunk.
+    """
+    out = np.empty(points.shape[0], dtype=np.float32)
+    with torch.no_grad():
+        for start in range(0, points.shape[0], chunk):
+            p = torch.from_numpy(np.ascontiguousarray(points[start : start + chunk]))
+            d = field_.sdf(p.to(field_.device, torch.float32))
+            out[start : start + chunk] = d.reshape(-1).float().cpu().numpy()
+    return out

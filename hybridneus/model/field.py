@@ -184,17 +184,7 @@ class HybridField(nn.Module):
             )
         act = nn.ReLU() if field.color_activation == "relu" else nn.Softplus()
         self.color_net = make_mlp(color_in, field.color_hidden, field.color_layers, 3, (), act)
-        if field.color_init not in ("grey", "contrast"):
-            raise ConfigError(
-                f"field.color_init: unknown {field.color_init!r}; expected grey or contrast"
-            )
-        if not 0.0 < field.color_init_distance <= 1.0:
-            raise ConfigError(
-                f"field.color_init_distance: {field.color_init_distance} is outside (0, 1]"
-            )
         background_rgb = torch.tensor([float(c) for c in background])
-        if field.color_init == "contrast":
-            self._init_color_away_from(background_rgb, field.color_init_distance)
         self.variance = nn.Parameter(torch.tensor(float(field.inv_s_init)))
         self.register_buffer("crop", torch.tensor([float(c) for c in crop]))
         bg = background_rgb.clamp(1e-3, 1 - 1e-3)
@@ -387,20 +377,6 @@ class HybridField(nn.Module):
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     # ------------------------------------------------------------------ init
-
-    @torch.no_grad()
-    def _init_color_away_from(self, background: torch.Tensor, distance: float) -> None:
-        """Start every channel ``distance`` from the background (below it if it is above 0.5).
-
-        Matter of the background's colour fires no events against the background, so where
-        no camera sees the initial shape against anything else, matter that starts near the
-        background's colour is never carved. Starting far from it makes the initial shape's
-        outline fire strong predicted events; where none were recorded, the loss removes it.
-        """
-        target = torch.where(
-            background >= 0.5, background - distance, background + distance
-        ).clamp(0.02, 0.98)
-        self.color_net.layers[-1].bias.copy_(torch.logit(target))
 
     @torch.no_grad()
     def _center_sphere(self, n: int = 512) -> None:

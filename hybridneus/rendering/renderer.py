@@ -21,8 +21,6 @@ class RenderOutput:
         normal: weighted unit normal, (n_rays, 3).
         gradients: SDF gradients at all samples, (n_rays * n_samples, 3) (Eikonal input).
         weights: (n_rays, n_samples).
-        opacity_fixed_s: opacity with the NeuS sharpness held constant, so that its gradient
-            reaches the SDF only, (n_rays,); None unless asked for.
     """
 
     color: torch.Tensor
@@ -31,7 +29,6 @@ class RenderOutput:
     normal: torch.Tensor
     gradients: torch.Tensor
     weights: torch.Tensor
-    opacity_fixed_s: torch.Tensor | None = None
 
 
 def render_rays(
@@ -42,7 +39,6 @@ def render_rays(
     generator: torch.Generator | None = None,
     train: bool = True,
     crop_softness: float = 0.01,
-    fixed_s_opacity: bool = False,
 ) -> RenderOutput:
     """Sample, evaluate the field and composite NeuS colours for a batch of rays.
 
@@ -55,8 +51,6 @@ def render_rays(
         train: keep the graph (double backward for the Eikonal term); otherwise all outputs
             are detached.
         crop_softness: width of the soft crop-cylinder edge that scales opacity.
-        fixed_s_opacity: also return ``opacity_fixed_s`` (for a prior on opacity that must not
-            be met by blurring the density).
 
     Returns:
         :class:`RenderOutput`.
@@ -75,25 +69,14 @@ def render_rays(
         rgb = field.radiance(pts, dirs_flat, grad, feats)
         dot = (dirs_flat * grad).sum(dim=-1)
         crop = field.crop_weight(pts, crop_softness).view(n_rays, n_samples)
-
-        def alpha(inv_s: torch.Tensor) -> torch.Tensor:
-            return crop * alpha_from_sdf(
-                sdf.view(n_rays, n_samples),
-                dot.view(n_rays, n_samples),
-                deltas,
-                inv_s,
-                field.cos_anneal,
-            )
-
-        weights = weights_from_alpha(alpha(field.inv_s()))
-        fixed = None
-        if fixed_s_opacity:
-            fixed = weights_from_alpha(alpha(field.inv_s().detach())).sum(dim=-1)
+        alpha = crop * alpha_from_sdf(sdf.view(n_rays, n_samples), dot.view(n_rays, n_samples),
+                                      deltas, field.inv_s(), field.cos_anneal)
+        weights = weights_from_alpha(alpha)
         color = composite(weights, rgb.view(n_rays, n_samples, 3), field.background())
         normals = torch.nn.functional.normalize(grad, dim=-1).view(n_rays, n_samples, 3)
         normal = composite(weights, normals)
         depth = (weights * mids).sum(dim=-1)
-    return RenderOutput(color, weights.sum(dim=-1), depth, normal, grad, weights, fixed)
+    return RenderOutput(color, weights.sum(dim=-1), depth, normal, grad, weights)
 
 
 def render_rays_chunked(

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from hybridneus.fileio import atomic_dir
+from hybridneus.simulate import generated
 from hybridneus.simulate.events import (
     EventChunk,
     EventModel,
@@ -151,7 +152,8 @@ def split_trajectories(config: SimulationConfig) -> dict[str, Trajectory]:
 
 
 def resolve_mesh(mesh: str | os.PathLike | SceneMesh) -> tuple[SceneMesh, str]:
-    """Load ``mesh`` (a path, ``builtin:<name>`` or a SceneMesh); return it and a scene name."""
+    """Load ``mesh`` (a path, ``builtin:<name>``, ``generated:<kind>:<seed>`` or a SceneMesh);
+    return it and a scene name."""
     if isinstance(mesh, SceneMesh):
         name = Path(mesh.source).stem if mesh.source else "mesh"
         return mesh, name.replace(BUILTIN_PREFIX, "")
@@ -159,6 +161,9 @@ def resolve_mesh(mesh: str | os.PathLike | SceneMesh) -> tuple[SceneMesh, str]:
     if text.startswith(BUILTIN_PREFIX):
         name = text[len(BUILTIN_PREFIX):]
         return builtin_scene(name), name
+    if text.startswith(generated.PREFIX):
+        kind, seed = generated.parse_source(text)
+        return generated.generated_scene(kind, seed), f"{kind}{seed}"
     return load_mesh(text), Path(text).stem
 
 
@@ -274,7 +279,8 @@ def simulate_dataset(
 
     Args:
         mesh: a mesh file (OBJ+MTL+textures, PLY, OFF, GLB), ``"builtin:device"`` /
-            ``"builtin:thin"``, or a :class:`SceneMesh`.
+            ``"builtin:thin"``, ``"generated:<kind>:<seed>"``
+            (:mod:`hybridneus.simulate.generated`), or a :class:`SceneMesh`.
         out: output directory; replaced atomically when the run succeeds.
         config: the simulation settings; defaults to the paper's (999 views, 8 revolutions
             of Seiffert's spiral, 346 x 260, C = 0.2).

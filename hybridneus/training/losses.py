@@ -1,7 +1,6 @@
-"""Loss terms of event-supervised NeuS training; each returns a scalar tensor.
+"""Loss functions of event-supervised NeuS training; each returns a scalar tensor.
 
-The trainer collects them in a dict ``{name: value}``, logs each as ``loss/<name>`` and
-weights it by ``config.loss.lambda_<name>``.
+:mod:`hybridneus.training.objective` and the priors combine them into a step's terms.
 """
 
 from __future__ import annotations
@@ -149,76 +148,3 @@ def outside_loss(sdf: torch.Tensor, outside: torch.Tensor) -> torch.Tensor:
     """
     weight = outside.to(sdf.dtype)
     return (torch.relu(-sdf) * weight).sum() / weight.sum().clamp(min=1.0)
-
-
-def sparsity_loss(sdf: torch.Tensor, tau: float) -> torch.Tensor:
-    """Mean of ``exp(-tau |sdf|)`` at random volume points (discourages stray surfaces).
-
-    Args:
-        sdf: SDF at random points inside the crop, (n_points,).
-        tau: decay; surfaces within ~1/tau of a point are penalised.
-
-    Returns:
-        loss: scalar.
-
-    Note:
-        Differentiable.
-    """
-    return torch.exp(-tau * sdf.abs()).mean()
-
-
-def background_match(
-    color: torch.Tensor,  # (n_rays, 3)
-    opacity: torch.Tensor,  # (n_rays,)
-    background: torch.Tensor,  # (3,)
-    sigma: float,
-) -> torch.Tensor:
-    r"""How much each ray's surface looks like the background, in (0, 1], without gradient.
-
-    With :math:`o` the ray's opacity and :math:`f` its foreground colour (the composite with
-    the background taken out),
-
-    .. math::
-        f = \frac{c - (1 - o)\,b}{o}, \qquad
-        m = \exp\!\big(-(\max_{ch} |f - b| / \sigma)^2\big)
-
-    Args:
-        color: rendered colour composited over the background, (n_rays, 3).
-        opacity: sum of the ray's weights, (n_rays,).
-        background: background RGB, (3,).
-        sigma: colour distance (max over channels, in [0, 1]) at which ``m`` falls to 1/e.
-
-    Returns:
-        m: (n_rays,), detached.
-    """
-    o = opacity.detach().clamp(1e-4, 1.0)[:, None]
-    bg = background.detach()
-    fg = (color.detach() - (1.0 - o) * bg) / o
-    return torch.exp(-(((fg - bg).abs().amax(dim=-1) / sigma) ** 2))
-
-
-def background_matter_loss(opacity: torch.Tensor, match: torch.Tensor) -> torch.Tensor:
-    """Mean of ``match * opacity`` over rays: thins matter that looks like the background.
-
-    Matter coloured like the constant background fires no events where it meets the
-    background, so the event loss is the same with or without it: an unseen underside gets
-    filled with background-coloured material down to the crop. Of two explanations of the data
-    this prefers the emptier one. Matter of another colour is seen against the background along
-    its outline, and the events there defend it.
-
-    Pass the opacity rendered with the NeuS sharpness held fixed
-    (``RenderOutput.opacity_fixed_s``): with the sharpness free, the cheapest way to lower
-    opacity everywhere is to keep the density blurry, which on the bunny held the sharpness
-    below 32 and emptied the mesh.
-
-    Args:
-        opacity: per-ray opacity, (n_rays,).
-        match: :func:`background_match` of those rays, (n_rays,), no gradient.
-
-    Returns:
-        loss: scalar.
-
-    Note:
-        Differentiable in ``opacity``.
-    """
-    return (opacity * match).mean()

@@ -1,4 +1,5 @@
-"""What a training run writes: config, checkpoints, metrics.csv, TensorBoard, previews."""
+"""What a training run writes: config, scene record, checkpoints, metrics.csv, TensorBoard,
+previews."""
 
 from __future__ import annotations
 
@@ -61,8 +62,11 @@ class RunLogger:
             tmp.write_text(buf.getvalue())
 
     def start(self, trainer) -> None:
-        """Write ``config.yaml`` and point ``latest`` at this run."""
+        """Write ``config.yaml`` and ``scene.yaml`` and point ``latest`` at this run."""
+        from hybridneus.training.scene import FILENAME
+
         save_config(trainer.cfg, self.run_dir / "config.yaml")
+        trainer.record.save(self.run_dir / FILENAME)
         if self.runs_root is not None:
             runs.set_latest(self.runs_root, self.run_dir)
 

@@ -1,8 +1,10 @@
 """Run folders: naming, checkpoints, the ``latest`` pointer, and loading a trained field.
 
-A run folder ``runs/<scene>-<YYYYmmdd-HHMMSS>`` holds ``config.yaml`` (the resolved
-configuration), ``checkpoints/last.pt``, ``metrics.csv``, ``previews/`` and, when TensorBoard
-is installed, ``tb/``. ``runs/latest`` is a one-line text file naming the newest run folder.
+A run folder ``runs/<scene>-<YYYYmmdd-HHMMSS>`` holds ``config.yaml`` (the configuration it
+was given), ``scene.yaml`` (what the fit estimated and measured:
+:mod:`hybridneus.training.scene`), ``checkpoints/last.pt``, ``metrics.csv``, ``previews/``
+and, when TensorBoard is installed, ``tb/``. ``runs/latest`` is a one-line text file naming
+the newest run folder.
 Checkpoints are written atomically and hold only tensors and primitive containers, so they
 load with ``torch.load(..., weights_only=True)``.
 """
@@ -23,6 +25,21 @@ from hybridneus.fileio import atomic_path
 
 CHECKPOINT = Path("checkpoints") / "last.pt"
 LATEST = "latest"
+
+
+def check_runs_root(runs_root: str | os.PathLike) -> None:
+    """Fail early, before any data is loaded, when ``runs_root`` cannot hold run folders.
+
+    Raises:
+        RunError: it is a file, or cannot be created.
+    """
+    root = Path(runs_root)
+    if root.exists() and not root.is_dir():
+        raise RunError(f"{root}: not a folder (--out must name a folder for the runs)")
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunError(f"{root}: cannot create the runs folder ({exc.strerror})") from None
 
 
 def new_run_dir(runs_root: str | os.PathLike, scene: str) -> Path:

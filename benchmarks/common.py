@@ -1,0 +1,119 @@
+"""What every benchmark writes: JSON lines stamped with the commit, machine, threads and date.
+
+A benchmark measures the code of one commit, so it refuses a tree with uncommitted changes to
+the package or the benchmarks unless told ``--allow-dirty`` (such lines carry ``"dirty":
+true`` and the report leaves them out). ``benchmarks/report.py`` makes docs/benchmarks.md
+from these lines alone, so every figure there has its line, its commit and its command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import functools
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+RESULTS = REPO / "benchmarks" / "results"
+#: What a benchmark's numbers depend on: a change here makes the tree dirty.
+CODE = ("hybridneus", "grids", "cli", "benchmarks", ":(exclude)benchmarks/results",
+        "pyproject.toml")
+
+
+#: A copy of the tree without its git history (a lent GPU machine gets one) names its commit
+#: here; whoever sets it vouches that the copy is that commit, unchanged.
+COMMIT_VARIABLE = "HYBRIDNEUS_BENCH_COMMIT"
+
+
+@functools.cache
+def git_state() -> tuple[str, bool]:
+    """(short HEAD, whether the code has uncommitted changes), read once per process: a commit
+    made while a long benchmark runs is not credited with its numbers."""
+    if os.environ.get(COMMIT_VARIABLE):
+        return os.environ[COMMIT_VARIABLE], False
+    git = ["git", "-C", str(REPO)]
+    try:
+        head = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=True).stdout.strip()
+        changed = subprocess.run([*git, "status", "--porcelain", "--", *CODE],
+                                 capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown", True
+    return head, bool(changed)
+
+
+def add_arguments(ap: argparse.ArgumentParser, name: str) -> None:
+    """``--out`` (default ``benchmarks/results/<name>.jsonl``) and ``--allow-dirty``."""
+    ap.add_argument("--out", type=Path, default=RESULTS / f"{name}.jsonl",
+                    help="JSON-lines results file (appended to)")
+    ap.add_argument("--allow-dirty", action="store_true",
+                    help="run on a tree with uncommitted changes (its lines say so and stay "
+                    "out of docs/benchmarks.md)")
+
+
+def check_tree(args: argparse.Namespace) -> None:
+    """Stop unless the tree is clean or ``--allow-dirty`` was given."""
+    commit, dirty = git_state()
+    if dirty and not getattr(args, "allow_dirty", False):
+        raise SystemExit(f"{REPO}: uncommitted changes to the code; commit them first, or "
+                         "give --allow-dirty (the lines then stay out of the docs)")
+
+
+def machine(device: str = "cpu") -> dict[str, Any]:
+    """Where a measurement ran: CPU model and cores, the GPU's name, torch's version."""
+    import torch
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    out = {"cpu": cpu, "cores": os.cpu_count(), "torch": torch.__version__,
+           "python": platform.python_version(), "device": device.split(":")[0]}
+    if device.startswith("cuda") and torch.cuda.is_available():
+        out["gpu"] = torch.cuda.get_device_name(torch.device(device))
+    return out
+
+
+def stamp(threads: int | None, device: str = "cpu") -> dict[str, Any]:
+    """The fields every result line carries."""
+    commit, dirty = git_state()
+    return {"commit": commit, "dirty": dirty,
+            "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            "threads": threads, "machine": machine(device),
+            "command": " ".join(shlex.quote(a) for a in ["python", *_script_args()])}
+
+
+def _script_args() -> list[str]:
+    argv = list(sys.argv)
+    if argv:
+        try:
+            argv[0] = str(Path(argv[0]).resolve().relative_to(REPO))
+        except ValueError:
+            pass
+    return argv
+
+
+def append(path: Path, record: dict[str, Any]) -> None:
+    """Append one line to ``path`` (created with its folder)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fh.write(json.dumps(record) + "\n")
+        fh.flush()
+
+
+def read_lines(path: Path) -> list[dict[str, Any]]:
+    """Every line of a results file (none when it does not exist)."""
+    if not path.is_file():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]

@@ -1,0 +1,190 @@
+"""Write docs/benchmarks.md from the result lines in benchmarks/results/*.jsonl.
+
+Every figure in that page comes from a line here, with its commit, date, machine and the
+command that made it; lines from trees with uncommitted changes are left out. Groups of lines
+are summarised (mean and spread over seeds, mean over scenes); ``--compare BASE NEW`` adds a
+table of two commits' fits paired by scene, seed, preset and budget on the same machine.
+
+    python benchmarks/report.py                                  # writes docs/benchmarks.md
+    python benchmarks/report.py --compare cf67ae4 4d2c1e0 --check
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from collections import defaultdict
+from pathlib import Path
+
+import common
+
+DOC = common.REPO / "docs" / "benchmarks.md"
+
+
+def _cpu(line: dict) -> str:
+    m = line.get("machine", {})
+    if m.get("gpu"):
+        return m["gpu"]
+    return f"{m.get('cpu', '?')}, {line.get('threads')} threads"
+
+
+def _budget(line: dict) -> str:
+    return f"{line['minutes']:g} min" if line.get("minutes") else f"{line.get('iters')} steps"
+
+
+def _f(v, digits: int = 4) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+def _spread(values: list[float]) -> str:
+    if len(values) < 2:
+        return "-"
+    return f"{min(values):.4f}-{max(values):.4f}"
+
+
+def _kind(scene: str) -> str:
+    return scene.split("-")[1] if scene.startswith("gen-") else scene
+
+
+def suite_section(lines: list[dict]) -> list[str]:
+    """Accuracy: per (commit, preset, budget, machine) the mean CD per scene over seeds."""
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in lines:
+        groups[(r["commit"], r["preset"], _budget(r), _cpu(r))].append(r)
+    out = ["## Accuracy", "",
+           "Chamfer distance (the paper's protocol, lower is better) of `hybridneus mesh`'s "
+           "mesh against the simulator's ground truth; per scene the mean over seeds and "
+           "their range. `gen-<kind>-<seed>` are generated objects "
+           "(`hybridneus.simulate.generated`); their means are per kind.", ""]
+    for (commit, preset, budget, cpu), rows in sorted(groups.items(), key=lambda kv: (
+            kv[1][0]["date"], kv[0])):
+        by_scene: dict[str, list[dict]] = defaultdict(list)
+        for r in rows:
+            by_scene[r["scene"]].append(r)
+        dates = sorted(r["date"][:10] for r in rows)
+        out += [f"### `{preset}`, {budget}, commit {commit}, {cpu}", "",
+                f"{len(rows)} fits, {dates[0]} to {dates[-1]}; command: "
+                f"`{rows[-1]['command']}`", "",
+                "| scene | seeds | CD mean | CD range | F@1% | steps | wall s |",
+                "|---|---|---|---|---|---|---|"]
+        means: dict[str, list[float]] = defaultdict(list)
+        for scene in sorted(by_scene, key=lambda s: (s.startswith("gen-"), s)):
+            rs = by_scene[scene]
+            cds = [r["chamfer"] for r in rs if r.get("chamfer") is not None]
+            failed = len(rs) - len(cds)
+            mean = statistics.mean(cds) if cds else None
+            if mean is not None:
+                means["generated" if scene.startswith("gen-") else "assets"].append(mean)
+            fs = [r["fscore"] for r in rs if r.get("fscore") is not None]
+            note = f" ({failed} without a surface)" if failed else ""
+            out.append(f"| {scene} | {len(rs)}{note} | {_f(mean)} | {_spread(cds)} | "
+                       f"{_f(statistics.mean(fs) if fs else None, 3)} | "
+                       f"{round(statistics.mean(r['steps'] for r in rs))} | "
+                       f"{statistics.mean(r.get('fit_wall_s', 0) for r in rs):.0f} |")
+        for name, values in means.items():
+            out.append(f"| **mean, {name}** | | **{statistics.mean(values):.4f}** | | | | |")
+        out.append("")
+    return out
+
+
+def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
+    """Two commits' fits paired by scene, seed, preset, budget and machine."""
+    key = lambda r: (r["scene"], r["seed"], r["preset"], _budget(r), _cpu(r))  # noqa: E731
+    a = {key(r): r for r in lines if r["commit"] == base}
+    b = {key(r): r for r in lines if r["commit"] == new}
+    pairs = sorted(set(a) & set(b))
+    if not pairs:
+        return [f"No fits of both {base} and {new} to pair.", ""]
+    out = [f"## {new} against {base}", "",
+           "The same fits on the same machine, run interleaved; per scene the mean over seeds "
+           "and the range.", "",
+           "| scene | preset | budget | seeds | CD " + base + " | range | CD " + new
+           + " | range | change |", "|---|---|---|---|---|---|---|---|---|"]
+    groups: dict[tuple, list[tuple]] = defaultdict(list)
+    for k in pairs:
+        groups[(k[0], k[2], k[3])].append((a[k].get("chamfer"), b[k].get("chamfer")))
+    totals: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    for (scene, preset, budget), values in sorted(groups.items()):
+        xs = [x for x, y in values if x is not None and y is not None]
+        ys = [y for x, y in values if x is not None and y is not None]
+        if not xs:
+            continue
+        mx, my = statistics.mean(xs), statistics.mean(ys)
+        totals["generated" if scene.startswith("gen-") else "assets"].append((mx, my))
+        out.append(f"| {scene} | {preset} | {budget} | {len(xs)} | {mx:.4f} | {_spread(xs)} | "
+                   f"{my:.4f} | {_spread(ys)} | {100 * (my / mx - 1):+.1f}% |")
+    for name, values in totals.items():
+        mx = statistics.mean(x for x, _ in values)
+        my = statistics.mean(y for _, y in values)
+        out.append(f"| **mean, {name}** | | | | **{mx:.4f}** | | **{my:.4f}** | | "
+                   f"{100 * (my / mx - 1):+.1f}% |")
+    return [*out, ""]
+
+
+def speed_section(results: dict[str, list[dict]]) -> list[str]:
+    """The latest clean line of each speed benchmark's measurements."""
+    out = ["## Speed", "", "The latest line of each measurement; timings are medians, and "
+           "machines differ by 2x between days, so compare only figures of one line.", ""]
+    rows = results.get("startup", [])
+    if rows:
+        out += ["### From `hybridneus fit` to the first step", "",
+                "| budget | dataset | events | seconds | commit | machine | date |",
+                "|---|---|---|---|---|---|---|"]
+        latest = {(r["mode"], r["dataset"]): r for r in rows}
+        for r in latest.values():
+            mode = "`--iters`" if r["mode"] == "iters" else "`--minutes` (probe included)"
+            out.append(f"| {mode} | {r['dataset']} | {r['events']:,} | {r['first_step_s']:.2f} "
+                       f"| {r['commit']} | {_cpu(r)} | {r['date'][:10]} |")
+        out += ["", f"Command: `{rows[-1]['command']}`", ""]
+    for bench, title in (("step", "One training step"), ("launches", "Operations per step"),
+                         ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
+                         ("data", "Data"), ("simulate", "Simulation")):
+        rows = results.get(bench, [])
+        if not rows:
+            continue
+        out += [f"### {title}", ""]
+        for r in rows[-8:]:
+            fields = {k: v for k, v in r.items() if k not in (
+                "bench", "commit", "dirty", "date", "machine", "command", "threads")}
+            out.append(f"- {r['date'][:10]}, {r['commit']}, {_cpu(r)}: `{fields}`")
+        out += ["", f"Command: `{rows[-1]['command']}`", ""]
+    return out
+
+
+def build(compare: list[tuple[str, str]]) -> str:
+    results: dict[str, list[dict]] = {}
+    for path in sorted(common.RESULTS.glob("*.jsonl")):
+        clean = [r for r in common.read_lines(path) if not r.get("dirty")]
+        if clean:
+            results[path.stem] = clean
+    suite = results.get("suite", [])
+    args = " ".join(f"--compare {b} {n}" for b, n in compare)
+    out = ["# Benchmarks", "",
+           f"Generated by `python benchmarks/report.py{' ' + args if args else ''}` from the "
+           "result lines in `benchmarks/results/` (do not edit by hand: rerun the command). "
+           "Each benchmark under `benchmarks/` says in its docstring how to run it; lines "
+           "carry their commit, machine, threads, date and command.", ""]
+    for base, new in compare:
+        out += compare_section(suite, base, new)
+    out += suite_section(suite)
+    out += speed_section(results)
+    return "\n".join(out).rstrip() + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--compare", nargs=2, action="append", default=[], metavar=("BASE", "NEW"))
+    ap.add_argument("--out", type=Path, default=DOC)
+    ap.add_argument("--check", action="store_true",
+                    help="exit 1 if the page differs from what the lines give")
+    args = ap.parse_args()
+    text = build([tuple(c) for c in args.compare])
+    if args.check:
+        same = args.out.is_file() and args.out.read_text() == text
+        raise SystemExit(0 if same else f"{args.out}: out of date; rerun the report")
+    args.out.write_text(text)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

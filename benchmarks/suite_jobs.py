@@ -1,0 +1,194 @@
+"""One fit of the accuracy suite and its scoring, each run in a child process of run_suite.py.
+
+:func:`fit_run` trains and keeps snapshots of the field along the way (``snapshots/``) plus
+``fit.json``; :func:`score_run` needs nothing else, so a fit made on another machine (a GPU
+host without the meshing libraries) is scored here from those files alone. Meshes are scored
+by the paper's Chamfer protocol as ``hybridneus mesh`` makes them (unseen pockets filled,
+cavities removed), and also without each of those two clean-ups, which prices them without
+another fit.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import time
+from pathlib import Path
+
+import common
+import numpy as np
+
+
+def preset_spec(spec: str) -> tuple[str, list[str]]:
+    """``fast`` -> ("fast", []); ``fast-rgb`` -> ("fast", ["train.supervision=rgb"])."""
+    if spec.endswith("-rgb"):
+        return spec.removesuffix("-rgb"), ["train.supervision=rgb"]
+    return spec, []
+
+
+def fit_run(job, started: float) -> Path:
+    """Fit ``job.dataset`` with ``job.preset`` for ``job.minutes`` or ``job.iters``; return
+    the run folder (with ``snapshots/`` and ``fit.json``). ``started``: the
+    ``time.perf_counter()`` of the process's start, from which the budget and the wall time
+    count (as the CLI's do)."""
+    import torch
+
+    from hybridneus.api import fit
+    from hybridneus.fileio import atomic_path
+
+    torch.set_num_threads(job.threads)
+    preset, overrides = preset_spec(job.preset)
+    budget = ([f"train.minutes={job.minutes}"] if job.minutes
+              else [f"train.iters={job.iters}", "train.minutes=0"])
+    staging = job.out_runs / f".snapshots-{os.getpid()}"
+    state: dict = {}
+
+    def save(trainer) -> None:
+        path = staging / f"t{trainer.elapsed:07.1f}-s{trainer.step}.pt"
+        with atomic_path(path) as tmp:
+            torch.save({"model": trainer.field.state_dict(), "elapsed": trainer.elapsed,
+                        "step": trainer.step, "total_steps": trainer.total_steps,
+                        "scene": dict(trainer.scene)}, tmp)
+
+    def snapshot(trainer, logs) -> None:
+        if "first_step_s" not in state:
+            state["first_step_s"] = time.perf_counter() - started - logs["step_seconds"]
+        state["trainer"] = trainer
+        marks = [trainer.total_steps * k // job.curve for k in range(1, job.curve)]
+        if trainer.step in marks:
+            save(trainer)
+
+    field = fit(job.dataset, preset, [snapshot],
+                overrides=[*budget, f"train.threads={job.threads}", "train.preview_every=0",
+                           *overrides, *job.overrides],
+                out=job.out_runs, device=job.device, progress=False, started=started)
+    wall = time.perf_counter() - started
+    trainer = state["trainer"]
+    save(trainer)
+    run_dir = Path(field.run_dir)
+    staging.rename(run_dir / "snapshots")
+    variant = [o for o in job.overrides if not o.startswith("train.seed=")]
+    info = {
+        "scene": job.scene, "preset": " ".join([job.preset, *variant]),
+        "overrides": variant, "seed": trainer.cfg.train.seed,
+        "minutes": job.minutes, "iters": job.iters, "noise": job.noise,
+        "dataset": str(Path(job.dataset).resolve()), "device": job.device,
+        "steps": int(trainer.step), "total_steps": int(trainer.total_steps),
+        "stopped_early": bool(trainer.stopped_early), "restores": _restores(trainer),
+        "fit_s": round(float(trainer.elapsed), 1), "fit_wall_s": round(wall, 1),
+        "first_step_s": round(float(state["first_step_s"]), 2),
+        "inv_s": round(float(field.inv_s().detach()), 1),
+        "fit_peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
+        "machine": common.machine(job.device),  # where it was fitted, not where it is scored
+    }
+    with atomic_path(run_dir / "fit.json") as tmp:
+        tmp.write_text(json.dumps(info, indent=1))
+    return run_dir
+
+
+def _restores(trainer) -> int:
+    guard = [p for p in trainer.priors if p.name == "collapse_guard"]
+    return int(guard[0].restores) if guard else 0
+
+
+def _score(field, gt, res: int, cameras=None, keep_cavities: bool = False):
+    """Mesh ``field`` as ``hybridneus mesh`` does and score it against ``gt``."""
+    from hybridneus.evaluation.geometry import chamfer_distance
+    from hybridneus.meshing import PostprocessOptions, extract_mesh
+
+    t = time.perf_counter()
+    post = PostprocessOptions(remove_cavities=not keep_cavities)
+    mesh = extract_mesh(field, res=res, progress=False, cameras=cameras, postprocess=post)
+    mesh_s = time.perf_counter() - t
+    if len(mesh.faces) == 0:
+        return {"chamfer": None, "faces": 0, "mesh_s": round(mesh_s, 2)}, mesh
+    cd = chamfer_distance(mesh, gt)
+    return {"chamfer": cd.chamfer, "accuracy": cd.accuracy, "completeness": cd.completeness,
+            "fscore": cd.fscore, "faces": int(len(mesh.faces)), "mesh_s": round(mesh_s, 2)}, mesh
+
+
+def _image_metrics(field, dataset, n_views: int) -> dict:
+    """Mean colour-corrected PSNR/SSIM over ``n_views`` test cameras (foreground pixels)."""
+    from hybridneus.evaluation import color_corrected_psnr_ssim
+    from hybridneus.evaluation.images import foreground_mask, read_frame
+    from hybridneus.rendering.views import inference_sampler, render_view
+
+    split = dataset.splits.get("test")
+    if split is None or split.rgb_paths is None or n_views <= 0:
+        return {}
+    sampler = inference_sampler(field)
+    psnrs, ssims = [], []
+    for i in np.unique(np.linspace(0, split.n_views - 1, min(n_views, split.n_views)).round()):
+        gt = read_frame(split.rgb_paths[int(i)], split.width, split.height)
+        if gt is None:
+            continue
+        mask = foreground_mask(gt, dataset.preset.background)
+        if mask.any():
+            img = render_view(field, split.intrinsics[int(i)], split.distortion[int(i)],
+                              split.c2w[int(i)], split.width, split.height, sampler)
+            m = color_corrected_psnr_ssim(img.color, gt, mask)
+            psnrs.append(m.psnr)
+            ssims.append(m.ssim)
+    if not psnrs:
+        return {}
+    return {"psnr": float(np.mean(psnrs)), "ssim": float(np.mean(ssims))}
+
+
+def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = None) -> dict:
+    """The Chamfer-versus-time curve and the final field's metrics of a :func:`fit_run` folder.
+
+    ``cache``: where to look for the dataset (by folder name) when the path recorded in
+    ``fit.json`` does not exist here (a fit made on another machine).
+    """
+    import torch
+
+    from hybridneus.config import load_config
+    from hybridneus.data import load_dataset
+    from hybridneus.data.dataset import read_camera_centres
+    from hybridneus.evaluation.geometry import sdf_mae
+    from hybridneus.meshing.convert import load_mesh, save_mesh
+    from hybridneus.training.runs import build_field
+
+    for name in ("fit.json", "config.yaml"):
+        if not (run_dir / name).is_file():
+            raise SystemExit(f"{run_dir / name}: missing (not a run folder made by the suite)")
+    info = json.loads((run_dir / "fit.json").read_text())
+    dataset = Path(info["dataset"])
+    if not (dataset / "gt_mesh.ply").is_file() and cache is not None:
+        dataset = cache / dataset.name
+    if not (dataset / "gt_mesh.ply").is_file():
+        raise SystemExit(f"{run_dir / 'fit.json'}: dataset {dataset.name} not found here")
+    cfg = load_config(run_dir / "config.yaml")
+    gt = load_mesh(dataset / "gt_mesh.ply")
+    snaps = sorted((run_dir / "snapshots").glob("t*.pt"),
+                   key=lambda p: int(p.stem.split("-s")[1]))
+    if not snaps:
+        raise SystemExit(f"{run_dir}: no snapshots/ to score")
+
+    def load(path: Path):
+        snap = torch.load(path, map_location="cpu", weights_only=True)
+        f = build_field(cfg, snap["scene"])
+        f.load_state_dict(snap["model"])
+        f.update_step(int(snap["step"]), int(snap["total_steps"]))
+        return f.eval(), snap
+
+    cameras = read_camera_centres(dataset / cfg.data.split)
+    curve = []
+    for path in snaps[:-1]:
+        f, snap = load(path)
+        score, _ = _score(f, gt, res, cameras)
+        curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), score["chamfer"]])
+    field, snap = load(snaps[-1])
+    final, mesh = _score(field, gt, res, cameras)
+    curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), final["chamfer"]])
+    unfilled, _ = _score(field, gt, res)
+    cavities, _ = _score(field, gt, res, cameras, keep_cavities=True)
+    report = {**info, "run": str(run_dir), "res": res, **final, "curve": curve,
+              "chamfer_unfilled": unfilled["chamfer"], "chamfer_cavities": cavities["chamfer"]}
+    if mesh is not None and len(mesh.faces):
+        save_mesh(mesh, run_dir / "mesh.ply")
+        report["sdf_mae"] = float(sdf_mae(mesh, gt).mae)
+        report.update(_image_metrics(field, load_dataset(dataset), image_views))
+    report["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    return report

@@ -1,0 +1,253 @@
+"""Typed assignment of dotted keys, ``key=value`` overrides, YAML files, and the keys of
+hybridneus 0.1 configs."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import types
+import typing
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hybridneus.config.tree import Config, preset_config
+from hybridneus.errors import ConfigError
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _coerce(key: str, value: Any, tp: Any) -> Any:
+    """Check ``value`` against the annotation ``tp``; return it converted (int -> float etc)."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _coerce(key, value, arg)
+            except ConfigError as exc:
+                errors.append(exc)
+        raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
+    if origin is list:
+        (item_tp,) = typing.get_args(tp) or (Any,)
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{key}: expected a list, got {value!r}")
+        return [_coerce(f"{key}[{i}]", v, item_tp) for i, v in enumerate(value)]
+    if tp is Any:
+        return value
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"{key}: expected true or false, got {value!r}")
+    if tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise ConfigError(f"{key}: expected an integer, got {value!r}")
+    if tp is float:
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"{key}: expected a number, got {value!r}")
+    if tp is str:
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"{key}: expected a string, got {value!r}")
+    raise ConfigError(f"{key}: unsupported type {_type_name(tp)}")
+
+
+def _section_fields(obj: Any) -> dict[str, Any]:
+    hints = typing.get_type_hints(type(obj))
+    return {f.name: hints[f.name] for f in dataclasses.fields(obj)}
+
+
+#: Keys of hybridneus 0.1 configs: their new name, or ``None`` where the key is gone (a
+#: schedule counted in steps, a prior that did not earn its place). A run's ``config.yaml``
+#: written by 0.1 still loads (:func:`config_from_dict` moves or drops these); ``--set``
+#: with an old key is an error that names the new one.
+LEGACY_KEYS: dict[str, str | None] = {
+    "loss.lambda_curvature": "priors.curvature.weight",
+    "loss.curvature_step": "priors.curvature.step",
+    "loss.curvature_end": "priors.curvature.end",
+    "loss.lambda_hull": "priors.hull.weight",
+    "loss.hull_resolution": "priors.hull.resolution",
+    "loss.hull_ramp": None,
+    "loss.hull_grow": None,
+    "loss.hull_start": None,
+    "loss.lambda_sparsity": None,
+    "loss.sparsity_tau": None,
+    "loss.lambda_background_matter": None,
+    "loss.background_matter_sigma": None,
+    "loss.background_matter_start": None,
+    "train.inv_s_floor": "priors.sharpness_floor.floor",
+    "train.inv_s_floor_at": "priors.sharpness_floor.at",
+    "train.inv_s_floor_min_steps": None,
+    "train.inv_s_floor_delay": None,
+    "train.inv_s_floor_blend": None,
+    "train.collapse_opacity": "priors.collapse_guard.opacity",
+    "train.collapse_window": "priors.collapse_guard.window",
+    "train.collapse_retries": "priors.collapse_guard.retries",
+    "train.collapse_healthy": "priors.collapse_guard.healthy",
+    "train.collapse_lr_factor": "priors.collapse_guard.lr_factor",
+    "data.crop_from_events": "estimate.crop",
+    "data.offset_from_events": "estimate.polarity_offset",
+    "data.eps_from_events": "estimate.tonemap_eps",
+    "data.eps_max": "estimate.eps_max",
+    "data.eps_start": None,
+    "data.eps_anneal_steps": None,
+    "data.denoise": None,
+    "data.denoise_slab": None,
+    "field.color_init": None,
+    "field.color_init_distance": None,
+}
+#: Old keys whose value 0 meant "off": they also set their prior's ``enabled``.
+_LEGACY_SWITCHES = {"loss.lambda_curvature", "loss.lambda_hull", "train.inv_s_floor",
+                    "train.collapse_opacity"}
+
+
+def _migrate(data: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """A 0.1 config dict in today's keys, and what was moved or dropped."""
+    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in data.items()}
+    notes = []
+    for old, new in LEGACY_KEYS.items():
+        section, name = old.split(".")
+        if not isinstance(out.get(section), dict) or name not in out[section]:
+            continue
+        value = out[section].pop(name)
+        if section == "train" and name == "warmup":
+            continue
+        if new is None:
+            notes.append(f"{old} dropped")
+            continue
+        parts = new.split(".")
+        node = out
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        if old in _LEGACY_SWITCHES:
+            node["enabled"] = bool(value and value > 0)
+            if not value or value <= 0:
+                notes.append(f"{old}={value} -> {'.'.join(parts[:-1])}.enabled=false")
+                continue
+        node[parts[-1]] = value
+        notes.append(f"{old} -> {new}")
+    train = out.get("train")
+    if isinstance(train, dict) and isinstance(train.get("warmup"), int) and train["warmup"] > 1:
+        train.pop("warmup")  # 0.1 counted warm-up steps; now it is a fraction
+        notes.append("train.warmup (steps) dropped")
+    return out, notes
+
+
+def set_value(cfg: Config, key: str, value: Any) -> None:
+    """Assign ``value`` to the dotted ``key`` (``train.lr``) with type checking.
+
+    Raises:
+        ConfigError: the key is unknown, names a whole section, or the value has the wrong type.
+    """
+    parts = key.split(".")
+    obj: Any = cfg
+    for i, part in enumerate(parts):
+        fields = _section_fields(obj)
+        if part not in fields:
+            if key in LEGACY_KEYS:
+                new = LEGACY_KEYS[key]
+                hint = f"now {new}" if new else "removed in hybridneus 0.2"
+                raise ConfigError(f"{key}: unknown key ({hint}; docs/training.md)")
+            where = ".".join(parts[:i]) or "config"
+            raise ConfigError(
+                f"{key}: unknown key {part!r} in {where}; expected one of {sorted(fields)}"
+            )
+        child = getattr(obj, part)
+        if i == len(parts) - 1:
+            if dataclasses.is_dataclass(child):
+                if not isinstance(value, dict):
+                    raise ConfigError(f"{key}: is a section; set one of its keys ({key}.<name>)")
+                for sub_key, sub_value in value.items():
+                    set_value(cfg, f"{key}.{sub_key}", sub_value)
+                return
+            setattr(obj, part, _coerce(key, value, fields[part]))
+            return
+        if not dataclasses.is_dataclass(child):
+            raise ConfigError(f"{key}: {'.'.join(parts[: i + 1])} is not a section")
+        obj = child
+
+
+def apply_overrides(cfg: Config, overrides: typing.Iterable[str]) -> Config:
+    """Apply ``key=value`` strings (values parsed as YAML: ``0.005``, ``true``, ``[1, 2]``).
+
+    Raises:
+        ConfigError: malformed override, unknown key or wrong type.
+    """
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"--set {item}: expected key=value, e.g. train.lr=0.005")
+        key, text = item.split("=", 1)
+        key = key.strip()
+        if key == "preset":
+            raise ConfigError("preset: choose it with --preset (or a Config), not --set")
+        try:
+            value = yaml.safe_load(text) if text.strip() else ""
+        except yaml.YAMLError:
+            value = text
+        if value is None and text.strip().lower() not in ("null", "none", "~"):
+            value = text
+        if isinstance(value, str) and value.lower() == "none":
+            value = None
+        set_value(cfg, key, value)
+    return cfg
+
+
+def config_from_dict(data: dict[str, Any], source: str = "config") -> Config:
+    """Build a :class:`Config` from a nested dict, starting from its ``preset`` defaults.
+
+    Raises:
+        ConfigError: ``data`` is not a mapping, or holds an unknown key / wrong type.
+    """
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping at the top level")
+    preset = data.get("preset", "fast")
+    if not isinstance(preset, str):
+        raise ConfigError(f"{source}: preset: expected a string, got {preset!r}")
+    cfg = preset_config(preset)
+    data, notes = _migrate(data)
+    if notes:
+        import logging
+
+        logging.getLogger("hybridneus").info(
+            "%s: a hybridneus 0.1 config; %s", source, "; ".join(notes))
+    try:
+        for key, value in data.items():
+            if key == "preset":
+                continue
+            set_value(cfg, key, value)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+    return cfg
+
+
+def save_config(cfg: Config, path: str | os.PathLike) -> None:
+    """Write the resolved tree as YAML (atomically)."""
+    from hybridneus.fileio import atomic_path
+
+    with atomic_path(path) as tmp:
+        tmp.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+
+
+def load_config(path: str | os.PathLike) -> Config:
+    """Read a YAML written by :func:`save_config` (or by hand).
+
+    Raises:
+        ConfigError: unreadable YAML, unknown key or wrong type (naming the file).
+    """
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ConfigError(f"{path}: cannot read config ({first})") from None
+    return config_from_dict(data or {}, source=str(path))

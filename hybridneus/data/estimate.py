@@ -1,0 +1,160 @@
+"""What a fit takes from the events when nothing states it: polarity offset, crop and eps.
+
+Each estimator is switched by ``estimate.<name>`` (:class:`hybridneus.config.EstimateConfig`)
+and never overrides a value the config sets (``data.<name>``). The sensor-noise filter runs
+once and serves the offset estimate; the event silhouettes are outlined once and shared by
+the crop and the hull prior (they are cached on the event stream). The values taken, with one
+line each on how, go into the run's ``scene.yaml``; ``hybridneus info`` prints the same.
+
+- **Polarity offset** (:mod:`hybridneus.data.balance`): the median per-pixel polarity balance
+  after the noise filter, when neither the path, ``scene.json`` nor the config states an
+  offset. A stated one that the events contradict gets a warning.
+- **Crop** (:func:`hybridneus.data.hull.event_hull_crop`): the crop cylinder shrunk to the
+  visual hull of the event silhouettes, when the config sets no ``data.crop_*``.
+- **Tonemap eps** (:mod:`hybridneus.data.contrast`): the preset's eps capped at
+  ``estimate.eps_max`` and at what the events' largest log-brightness changes need; the loss
+  eases into it from the preset's over ``estimate.eps_ease`` of training.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+from hybridneus.config import DataConfig, EstimateConfig
+from hybridneus.data.dataset import EventDataset
+from hybridneus.data.presets import apply_overrides
+
+log = logging.getLogger("hybridneus")
+
+#: The noise filter's time slab, in views (:func:`hybridneus.data.denoise.denoised_split`).
+NOISE_SLAB = 2.0
+CROP_KEYS = ("crop_r", "crop_y_min", "crop_y_max")
+
+
+@dataclass
+class Estimates:
+    """What :func:`estimate_scene` found.
+
+    Attributes:
+        dataset: the dataset whose preset holds the values taken (the input itself when
+            nothing changed).
+        taken: preset field -> one line on how its value was estimated (only the values the
+            fit took from the events).
+        eps_start: the eps the loss eases from (the preset's) when the estimate lowered it.
+        lines: one line per finding (noise, balance, crop, eps), for the log and ``info``.
+        warnings: findings that contradict a stated value.
+        noise: the noise filter's one-line report, when the offset estimate ran it.
+        balance: the :class:`~hybridneus.data.balance.PolarityBalance`, likewise.
+    """
+
+    dataset: EventDataset
+    taken: dict[str, str] = field(default_factory=dict)
+    eps_start: float | None = None
+    lines: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    noise: str | None = None
+    balance: Any = None
+
+    def take(self, values: dict[str, Any], why: str) -> None:
+        """Put ``values`` into the dataset's preset (on a copy) and record ``why``."""
+        self.dataset = copy.copy(self.dataset)
+        self.dataset.preset = apply_overrides(self.dataset.preset, values)
+        self.dataset.notes = [*self.dataset.notes, why]
+        for key in values:
+            self.taken[key] = why
+
+
+def estimate_scene(
+    dataset: EventDataset, cfg: EstimateConfig, data: DataConfig | None = None
+) -> Estimates:
+    """Run the estimators ``cfg`` switches on over ``dataset``'s training split.
+
+    Args:
+        dataset: the loaded dataset; its preset already holds ``data``'s overrides.
+        cfg: which estimators run, and their settings.
+        data: the config's dataset section: a value set there is never estimated, and
+            ``data.split`` names the split the events come from. Default: nothing set.
+
+    Returns:
+        The :class:`Estimates`; ``dataset`` itself is not changed.
+    """
+    data = data if data is not None else DataConfig()
+    found = Estimates(dataset)
+    split = dataset[data.split]
+    if cfg.polarity_offset and data.polarity_offset is None:
+        _polarity_offset(found, split)
+    if cfg.crop and all(getattr(data, k) is None for k in CROP_KEYS):
+        _crop(found, split)
+    if cfg.tonemap_eps and data.tonemap_eps is None:
+        _tonemap_eps(found, split, cfg.eps_max)
+    for line in found.lines:
+        log.info(line)
+    for line in found.warnings:
+        log.warning(line)
+    return found
+
+
+def noise_and_balance(split) -> tuple[str, Any]:
+    """The noise filter's one-line report and the :class:`PolarityBalance` after it."""
+    from hybridneus.data.balance import polarity_balance
+    from hybridneus.data.denoise import denoised_split
+
+    filtered = denoised_split(split, NOISE_SLAB)
+    return filtered[1].line(), polarity_balance(split, NOISE_SLAB, filtered)
+
+
+def _polarity_offset(found: Estimates, split) -> None:
+    noise, balance = noise_and_balance(split)
+    found.noise, found.balance = noise, balance
+    found.lines += [noise, balance.line()]
+    suggested = balance.suggested()
+    p = found.dataset.preset
+    if suggested is None:
+        return
+    if "polarity_offset" in found.dataset.stated:
+        if balance.disagrees(p.polarity_offset):
+            found.warnings.append(
+                f"polarity offset {p.polarity_offset:g} (preset from the "
+                f"{found.dataset.preset_source}), but the events imply {suggested:g}; --set "
+                f"data.polarity_offset={suggested:g} uses theirs")
+        return
+    found.take({"polarity_offset": suggested},
+               f"{suggested:g} from the events' balance (the {found.dataset.preset_source} "
+               f"guessed {p.polarity_offset:g}; estimate.polarity_offset=false keeps the guess)")
+
+
+def _crop(found: Estimates, split) -> None:
+    from hybridneus.data.hull import NOTHING_OUTLINED, event_hull_crop
+
+    p = found.dataset.preset
+    crop = (p.crop_r, p.crop_y_min, p.crop_y_max)
+    tight = event_hull_crop(split, crop)
+    if tight is None or all(abs(a - b) < 1e-6 for a, b in zip(tight, crop, strict=True)):
+        why = NOTHING_OUTLINED if tight is None else "it is inside the events' hull"
+        found.lines.append(f"crop: keeping the preset's (r {p.crop_r:g}, y {p.crop_y_min:g} .. "
+                           f"{p.crop_y_max:g}): {why}")
+        return
+    values = {k: round(float(v), 4) for k, v in zip(CROP_KEYS, tight, strict=True)}
+    why = (f"r {values['crop_r']}, y {values['crop_y_min']} .. {values['crop_y_max']} from the "
+           f"events' visual hull (preset: r {p.crop_r:g}, y {p.crop_y_min:g} .. "
+           f"{p.crop_y_max:g}; estimate.crop=false keeps the preset's)")
+    found.lines.append(f"crop: {why}")
+    found.take(values, why)
+
+
+def _tonemap_eps(found: Estimates, split, eps_max: float) -> None:
+    from hybridneus.data.contrast import event_extent, loss_eps
+
+    p = found.dataset.preset
+    eps, reason = loss_eps(p.tonemap_eps, event_extent(split, p), eps_max)
+    if eps == p.tonemap_eps:
+        found.lines.append(f"tonemap eps: {eps:g}, {reason}")
+        return
+    why = (f"{eps:g} (preset {p.tonemap_eps:g}): {reason}; estimate.tonemap_eps=false keeps "
+           "the preset's")
+    found.lines.append(f"tonemap eps: {why}")
+    found.eps_start = float(p.tonemap_eps)
+    found.take({"tonemap_eps": eps}, why)

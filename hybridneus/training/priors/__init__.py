@@ -1,0 +1,50 @@
+"""The priors of a fit: one module per prior, each switched by ``priors.<name>.enabled``.
+
+- ``hull`` (:mod:`.hull`): a constant background, so the events' visual hull is free space;
+- ``curvature`` (:mod:`.curvature`): smooth surfaces where the events are silent;
+- ``sharpness_floor`` (:mod:`.sharpness`): a solid, opaque object;
+- ``collapse_guard`` (:mod:`.collapse`): the object fills part of most views.
+
+:func:`build_priors` makes the enabled ones; the trainer calls their hooks
+(:class:`~hybridneus.training.priors.base.Prior`) and knows none of them by name.
+"""
+
+from __future__ import annotations
+
+import math
+
+from hybridneus.config import Config
+from hybridneus.training.priors.base import Prior, RandomPoints, StepContext
+from hybridneus.training.priors.collapse import CollapseGuard
+from hybridneus.training.priors.curvature import CurvaturePrior
+from hybridneus.training.priors.hull import HullPrior, free_space_of
+from hybridneus.training.priors.sharpness import SharpnessFloor
+
+
+def build_priors(cfg: Config, field, split, aabb, device) -> list[Prior]:
+    """The priors ``cfg.priors`` enables, in the order their hooks run.
+
+    Args:
+        cfg: the fit's config.
+        field: the field being trained (fresh: the guard's first restore point).
+        split: the training split (the hull prior outlines its events).
+        aabb: (6,) the crop box.
+        device: where the priors' tensors live.
+    """
+    p = cfg.priors
+    out: list[Prior] = []
+    if p.hull.enabled:
+        free = free_space_of(split, aabb, p.hull, device)
+        if free is not None:
+            out.append(HullPrior(p.hull, free))
+    if p.curvature.enabled:
+        out.append(CurvaturePrior(p.curvature))
+    if p.sharpness_floor.enabled:
+        out.append(SharpnessFloor(p.sharpness_floor, math.exp(10.0 * cfg.field.inv_s_init)))
+    if p.collapse_guard.enabled:
+        out.append(CollapseGuard(p.collapse_guard, field))
+    return out
+
+
+__all__ = ["CollapseGuard", "CurvaturePrior", "HullPrior", "Prior", "RandomPoints",
+           "SharpnessFloor", "StepContext", "build_priors"]

@@ -1,0 +1,121 @@
+"""The scene record of a run: what a fit took from the data and the machine (``scene.yaml``).
+
+The config is an input and is never written to. Everything a fit decides for itself goes
+here instead: the scene preset it used (with the values estimated from the events and how),
+the eps the loss eases from, the schedule's length (a ``--minutes`` budget turned into steps
+once, before the first step) and the pixels per step of the device. It is printed when the
+fit starts, saved beside ``config.yaml``, and read back on ``--resume``, which estimates
+nothing again. ``hybridneus fit DATA --iters <steps>`` with the same config repeats a budgeted
+run's schedule exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hybridneus.errors import RunError
+from hybridneus.fileio import atomic_path
+
+FILENAME = "scene.yaml"
+#: Preset fields a resume applies to the dataset (the rest the dataset states itself).
+PRESET_KEYS = ("threshold", "polarity_offset", "max_window", "cyclic", "neg_ratio",
+               "tonemap_eps", "crop_r", "crop_y_min", "crop_y_max", "background")
+
+
+@dataclass
+class SceneRecord:
+    """See the module docstring.
+
+    Attributes:
+        dataset: the dataset folder.
+        split: the split trained on.
+        preset_source: where the preset came from (a published scene's path, ``scene.json``).
+        preset: the scene preset used, as a plain dict (after overrides and estimates).
+        estimated: preset field -> one line on how the fit estimated it; fields not named
+            here came from the dataset, its preset or the config.
+        eps_start: the tonemap eps the loss eases from (``estimate.eps_ease``), or ``None``.
+        steps: the schedule's length.
+        steps_from: how ``steps`` was chosen (``train.iters``, or the budget and the speed).
+        n_rays: pixels per step.
+        device: the device trained on.
+        version: the hybridneus version that wrote the record.
+    """
+
+    dataset: str
+    split: str
+    preset_source: str
+    preset: dict[str, Any]
+    estimated: dict[str, str] = field(default_factory=dict)
+    eps_start: float | None = None
+    steps: int = 1
+    steps_from: str = "train.iters"
+    n_rays: int = 256
+    device: str = "cpu"
+    version: str = ""
+
+    def preset_overrides(self) -> dict[str, Any]:
+        """The preset values to give the dataset reader so that it uses this record's."""
+        out = {}
+        for key in PRESET_KEYS:
+            value = self.preset[key]
+            out[key] = tuple(value) if isinstance(value, list) else value
+        return out
+
+    def lines(self) -> list[str]:
+        """What the record says, one line per topic (printed when a fit starts)."""
+        p = self.preset
+        out = [f"scene: {self.dataset} ({self.split}), preset from the {self.preset_source}"]
+        for key in ("threshold", "polarity_offset", "tonemap_eps"):
+            out.append(f"  {key} {p[key]:g}" + _how(self.estimated.get(key)))
+        crop = f"  crop r {p['crop_r']:g}, y {p['crop_y_min']:g} .. {p['crop_y_max']:g}"
+        out.append(crop + _how(self.estimated.get("crop_r")))
+        out.append(f"  {self.steps} steps ({self.steps_from}), {self.n_rays} pixels per step "
+                   f"on {self.device}")
+        return out
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the record as YAML (atomically)."""
+        with atomic_path(path) as tmp:
+            tmp.write_text(yaml.safe_dump(dataclasses.asdict(self), sort_keys=False))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> SceneRecord:
+        """Read a record written by :meth:`save`.
+
+        Raises:
+            RunError: the file is missing, unreadable or not a scene record.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise RunError(f"{path}: missing (runs of hybridneus 0.1 have none and cannot be "
+                           "resumed; mesh them, or fit again)")
+        try:
+            data = yaml.safe_load(path.read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            first = (str(exc).splitlines() or [type(exc).__name__])[0]
+            raise RunError(f"{path}: cannot read the scene record ({first})") from None
+        names = {f.name for f in dataclasses.fields(cls)}
+        if not isinstance(data, dict) or "dataset" not in data:
+            raise RunError(f"{path}: not a scene record")
+        required = {"split", "preset_source", "preset", "steps"}
+        if not required <= set(data) or not isinstance(data["preset"], dict):
+            raise RunError(f"{path}: incomplete scene record (missing "
+                           f"{sorted(required - set(data)) or 'preset'})")
+        unknown = set(data) - names
+        if unknown:
+            raise RunError(f"{path}: unknown keys {sorted(unknown)}")
+        record = cls(**data)
+        missing = [k for k in PRESET_KEYS if k not in record.preset]
+        if missing or not isinstance(record.steps, int) or record.steps < 1:
+            raise RunError(f"{path}: incomplete scene record (missing {missing or 'steps'})")
+        return record
+
+
+def _how(line: str | None) -> str:
+    return f"  (estimated: {line})" if line else ""

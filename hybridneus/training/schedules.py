@@ -1,0 +1,81 @@
+"""Every schedule of a fit, as a pure function of its progress ``p`` in [0, 1].
+
+``p = step / total_steps``: the same config gives the same schedule on any machine, and a fit
+of a different length stretches it instead of cutting it. Lengths and onsets are fractions
+of training too.
+"""
+
+from __future__ import annotations
+
+
+def progress(step: int, total: int) -> float:
+    """``step / total`` (0 for a schedule of no length)."""
+    return step / total if total > 0 else 0.0
+
+
+def ramp(p: float, start: float, length: float) -> float:
+    """0 before ``start``, then rising linearly to 1 over ``length`` (1 at once when
+    ``length <= 0``).
+
+    A term or bound switched on at full strength part-way through training (Adam has scaled
+    its steps to the other terms' gradients) jolts the field; one grown from 0 does not.
+    """
+    if p < start:
+        return 0.0
+    if length <= 0:
+        return 1.0
+    return min(1.0, (p - start) / length)
+
+
+def lr_factor(p: float, warmup: float, decay_start: float, decay_final: float) -> float:
+    """Learning-rate multiplier: linear warm-up over ``warmup``, constant, then an exponential
+    decay from ``decay_start`` that reaches ``decay_final`` at ``p = 1``.
+
+    The trainer takes it at the end of each step (``p = (step + 1) / total``), so that the
+    first step of a warm-up moves the field a little instead of not at all.
+    """
+    f = ramp(p, 0.0, warmup) if warmup > 0 else 1.0
+    if p > decay_start and decay_start < 1.0:
+        f *= decay_final ** min(1.0, (p - decay_start) / (1.0 - decay_start))
+    return f
+
+
+def geometric(p: float, start: float, end: float, at: float) -> float:
+    """``start`` growing geometrically to ``end`` at ``p = at``, then held."""
+    if at <= 0:
+        return end
+    return start * (end / start) ** min(1.0, p / at)
+
+
+def sharpness_floor(
+    p: float, start: float, floor: float, at: float, delay: float = 0.0, blend: float = 0.0
+) -> float:
+    """The lowest NeuS sharpness allowed at ``p`` (0.0: no floor).
+
+    None before ``delay``; then the curve :func:`geometric` from ``start`` (the initial
+    sharpness) to ``floor`` at ``at``, or ``floor`` itself when it is below ``start``. Over
+    ``blend`` after the delay the curve's value ``f`` is replaced by ``f ** w``, ``w`` rising
+    linearly from near 0 to 1: the floor grows out of 1 instead of jumping to the curve
+    (lifted from 6 to 21 in one step, a bunny's render went transparent and never came back).
+    """
+    if floor <= 0 or p < delay:
+        return 0.0
+    value = floor if floor <= start else geometric(p, start, floor, at)
+    if blend <= 0:
+        return value
+    return value ** max(ramp(p, delay, blend), 1e-3)
+
+
+def eased(p: float, start: float | None, end: float, length: float) -> float:
+    """``start`` moving geometrically to ``end`` over ``length``, then ``end`` (``end``
+    throughout when ``start`` is ``None``)."""
+    if start is None or length <= 0 or p >= length:
+        return end
+    return start * (end / start) ** (p / length)
+
+
+def fading(p: float, end: float) -> float:
+    """1 falling linearly to 0 at ``end`` (1 throughout when ``end <= 0``)."""
+    if end <= 0:
+        return 1.0
+    return max(0.0, 1.0 - p / end)
