@@ -162,7 +162,7 @@ class _ScatterCorners(torch.autograd.Function):
         out = first.new_zeros((size, *first.shape[1:]))
         if first.dim() == 1 and not first.is_cuda:
             # 1-D scatter_add_ with int64 indices ran ~1.7x faster than index_add_ with int32
-            # on CPU, conversion included (docs/benchmarks/grids.md).
+            # on CPU, conversion included (benchmarks/bench_grids.py).
             idx64 = idx.long()
             for c, src in enumerate(srcs):
                 out.scatter_add_(0, idx64[c], _to_rows(src.contiguous(), n_features))
@@ -233,7 +233,7 @@ def gather_levels(
             scatter in the backward) rather than level by level (one gather per level, 8
             scatters per level). ``None``: joined on CUDA, where every kernel launch costs
             about as much as the work of a training batch; level by level on the CPU, where
-            small per-level tables stay in cache (docs/benchmarks/grids.md). The results
+            small per-level tables stay in cache (benchmarks/bench_grids.py). The results
             are the same.
 
     Returns:

@@ -38,10 +38,10 @@ class _MultiresGrid(nn.Module):
         self.out_dim = self.n_levels * n_features_per_level
         self.active_levels = self.n_levels
         #: Row-index dtype: int32 halves the index traffic (measured faster on CPU, see
-        #: docs/benchmarks/grids.md); int64 gives identical rows.
+        #: benchmarks/bench_grids.py); int64 gives identical rows.
         self.index_dtype = torch.int32
         #: Points per chunk, bounding the per-level (8, chunk * F) temporaries; None picks
-        #: 2**18 on CPU and 2**20 on CUDA, as measured in docs/benchmarks/grids.md.
+        #: 2**18 on CPU and 2**20 on CUDA, as measured in benchmarks/bench_grids.py.
         self.chunk_size: int | None = None
         #: Largest (levels, 8, n * F) corner buffer, in bytes, encoded with all levels
         #: batched; larger batches go level by level (CPU only; CUDA always batches).
@@ -164,7 +164,7 @@ class _MultiresGrid(nn.Module):
         (n_levels, 8, n * F) temporaries stay small. Above ``batch_bytes`` they no longer fit
         glibc's reusable heap: every call then maps and page-faults fresh memory, which cost
         more than the gathers themselves here, so larger chunks go level by level (<= 64
-        bytes per point; docs/benchmarks/grids.md).
+        bytes per point; benchmarks/bench_grids.py).
         """
         n, n_feat, n_act = xt.shape[1], self.n_features_per_level, self.active_levels
         size = n_act * 8 * n * n_feat * xt.element_size()

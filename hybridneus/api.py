@@ -78,6 +78,8 @@ def fit(
         resume: a run folder to continue from its last checkpoint (identical state).
         device: ``auto``, ``cpu``, ``cuda``.
         progress: show a progress bar on stderr.
+        started: the ``time.perf_counter()`` from which a ``train.minutes`` budget counts
+            (default: the call); the CLI passes its own start.
 
     Returns:
         The trained :class:`~hybridneus.model.field.HybridField` (a ``Field``); its
@@ -156,6 +158,10 @@ def prepare(
     return trainer, logger
 
 
+#: A budget that leaves fewer steps than this is refused rather than trained on.
+MIN_BUDGET_STEPS = 10
+
+
 def _fix_budget(trainer, logger, end: float) -> None:
     """Turn the time to ``end`` into the trainer's step count (recorded), and stop it at
     ``end`` should the machine slow down. With a logger, the step-0 preview and checkpoint
@@ -179,6 +185,11 @@ def _fix_budget(trainer, logger, end: float) -> None:
     # the final checkpoint and curve come after the last step
     left = end - time.perf_counter() - 2.0 * save - 0.5
     steps, how = budget_steps(trainer, max(left, 0.0), overhead)
+    if steps < MIN_BUDGET_STEPS:
+        spent = t.minutes * 60.0 - (end - time.perf_counter())
+        raise ConfigError(f"train.minutes: {t.minutes:g} min leave time for {steps} steps after "
+                          f"{spent:.0f} s of loading and probing; give a longer budget or "
+                          "--iters")
     trainer.total_steps = trainer.record.steps = steps
     trainer.record.steps_from = how
     trainer.deadline = end - save - 0.5

@@ -156,3 +156,14 @@ def test_gpu_pack_carries_what_a_fit_reads_and_unpacks_returned_runs(tiny_scene,
     (run,) = gpu_pack.unpack(flat, tmp_path / "runs")
     assert (run / "fit.json").read_text() == "fit.json"
     assert (run / "snapshots" / "t00060.0-s9.pt").read_bytes() == b"snapshot"
+
+
+def test_docs_benchmarks_is_generated_from_the_result_lines():
+    """Every figure in docs/benchmarks.md has its line: the page is the report's output."""
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    flags = report.DOC.read_text().split("`python benchmarks/report.py", 1)[1].split("`", 1)[0]
+    words = flags.split()
+    compare = [(words[i + 1], words[i + 2]) for i, w in enumerate(words) if w == "--compare"]
+    assert report.DOC.read_text() == report.build(compare), "rerun python benchmarks/report.py"

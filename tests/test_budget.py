@@ -40,14 +40,14 @@ def test_a_budget_is_turned_into_steps_once_and_repeats_with_iters(scene, tmp_pa
     timings are fixed here, so that the count does not depend on the machine's speed.)"""
     import hybridneus.training.budget as budget
 
-    monkeypatch.setattr(budget, "step_seconds", lambda trainer: (0.05, 0.05, 0.05, 0.0))
-    cfg = tiny("train.minutes=0.05", "train.seed=2")
+    monkeypatch.setattr(budget, "step_seconds", lambda trainer: (0.5, 0.5, 0.5, 0.0))
+    cfg = tiny("train.minutes=0.2", "train.seed=2")
     started = time.perf_counter()
     timed = fit(scene, cfg, out=tmp_path / "timed", device="cpu", started=started)
-    left = 3.0 - (time.perf_counter() - started)
+    left = 12.0 - (time.perf_counter() - started)
     record = SceneRecord.load(timed.run_dir / "scene.yaml")
-    assert "budget" in record.steps_from and "50.0, 50.0 and 50.0 ms" in record.steps_from
-    assert 10 < record.steps < 3.0 / (0.05 * budget.HEADROOM)
+    assert "budget" in record.steps_from and "500.0, 500.0 and 500.0 ms" in record.steps_from
+    assert 10 <= record.steps < 12.0 / (0.5 * budget.HEADROOM)
     assert timed.trainer_step == record.steps and left > 0
     again = fit(scene, tiny(f"train.iters={record.steps}", "train.seed=2"), device="cpu")
     a, b = params(timed), params(again)
@@ -62,3 +62,10 @@ def test_a_run_stops_at_its_deadline(scene, caplog):
         trainer.fit(progress=False)
     assert trainer.stopped_early and 0 < trainer.step < 100000
     assert "the time budget ran out" in caplog.text
+
+
+def test_a_budget_too_short_to_train_is_refused(scene, tmp_path):
+    from hybridneus.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="train.minutes: 0.001 min leave time for"):
+        fit(scene, tiny("train.minutes=0.001"), out=tmp_path, device="cpu")

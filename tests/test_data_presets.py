@@ -15,7 +15,6 @@ from test_data_builder import H, W, random_events, write_split  # noqa: E402
 from hybridneus.data import (  # noqa: E402
     apply_overrides,
     load_dataset,
-    parse_override_strings,
     preset_for_path,
     resolve_preset,
 )
@@ -154,9 +153,7 @@ def test_overrides_applied_and_recorded(tmp_path):
 
 def test_override_strings_are_parsed(tmp_path):
     p = preset_for_path(tmp_path / "nerf" / "lego")
-    o = parse_override_strings(
-        ["threshold=0.3", "cyclic=true", "max_window=7", "background=0.2,0.3,0.4"]
-    )
+    o = {"threshold": "0.3", "cyclic": "true", "max_window": "7", "background": "0.2,0.3,0.4"}
     q = apply_overrides(p, o)
     assert q.threshold == 0.3 and q.cyclic is True and q.max_window == 7
     assert q.background == (0.2, 0.3, 0.4)
@@ -185,11 +182,6 @@ def test_bad_overrides(tmp_path, overrides, key):
         apply_overrides(p, overrides)
     msg = str(info.value)
     assert msg.startswith(key) and "\n" not in msg
-
-
-def test_bad_override_string():
-    with pytest.raises(ConfigError, match="key=value"):
-        parse_override_strings(["threshold"])
 
 
 def test_width_height_override_changes_bounds(tmp_path):

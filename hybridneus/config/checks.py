@@ -10,7 +10,7 @@ from hybridneus.config.tree import Config
 from hybridneus.errors import ConfigError
 
 # A CPU step's cost grows with the batch; a GPU step's barely does (it is bound by kernel
-# launches), and 1,024 pixels gave the best 2-minute H100 fits (docs/benchmarks/training.md).
+# launches), so a larger batch is nearly free there.
 N_RAYS_BY_DEVICE = {"cpu": 256, "cuda": 1024}
 
 

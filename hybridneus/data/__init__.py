@@ -15,7 +15,6 @@ from hybridneus.data.events import EventStream, load_events
 from hybridneus.data.presets import (
     ScenePreset,
     apply_overrides,
-    parse_override_strings,
     preset_for_path,
     preset_for_scene,
     resolve_preset,
@@ -69,7 +68,6 @@ __all__ = [
     "load_events",
     "load_split",
     "near_far_unit_sphere",
-    "parse_override_strings",
     "preset_for_path",
     "preset_for_scene",
     "resolve_preset",

@@ -232,21 +232,6 @@ def apply_overrides(preset: ScenePreset, overrides: dict[str, Any] | None) -> Sc
     return out
 
 
-def parse_override_strings(items: list[str] | None) -> dict[str, str]:
-    """Turn command-line ``key=value`` strings into a dict for :func:`apply_overrides`.
-
-    Raises:
-        ConfigError: an item without ``=`` or with an empty key.
-    """
-    out: dict[str, str] = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"{item}: expected key=value (e.g. threshold=0.2)")
-        out[key.strip()] = value.strip()
-    return out
-
-
 def _preset_from_parts(
     parts: tuple[str, ...],
 ) -> tuple[ScenePreset, str, frozenset[str]] | None:

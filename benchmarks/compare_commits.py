@@ -1,0 +1,118 @@
+"""Two commits' accuracy on the same fits, interleaved on one machine.
+
+Fits every (scene, seed) with the ``fast`` preset at the base commit and at the new one (HEAD
+by default), one after the other, alternating which goes first, so that the machine's drift
+falls on both alike. Each commit runs from a worktree of its own (its benchmarks/run_suite.py
+and its package, from a tree of links laid out as pyproject.toml maps it, so nothing is
+installed and later commits to this checkout change nothing mid-run); their lines are added to
+benchmarks/results/suite.jsonl in today's format. ``python benchmarks/report.py --compare
+BASE NEW`` then pairs them.
+
+    python benchmarks/compare_commits.py cf67ae4 --seeds 0 1 2
+    python benchmarks/compare_commits.py cf67ae4 --scenes none --generated 6 --generated-seed 2026
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import common
+import run_suite
+
+WORK = Path("/tmp/hybridneus-compare")
+
+
+def worktree(commit: str) -> tuple[Path, Path]:
+    """(worktree, site folder) of ``commit``: the site holds ``hybridneus`` as links into the
+    worktree, with ``grids/`` and ``cli/`` where the package maps them."""
+    tree, site = WORK / commit, WORK / f"{commit}-site"
+    if not tree.is_dir():
+        subprocess.run(["git", "-C", str(common.REPO), "worktree", "add", "--detach", str(tree),
+                        commit], check=True)
+    package = site / "hybridneus"
+    if not package.is_dir():
+        package.mkdir(parents=True)
+        for item in (tree / "hybridneus").iterdir():
+            (package / item.name).symlink_to(item)
+        (package / "grids").symlink_to(tree / "grids")
+        (package / "cli").symlink_to(tree / "cli")
+    return tree, site
+
+
+def run_at(args, commit: str, name: str, seed: int) -> None:
+    """One fit at ``commit`` with that commit's own suite; its line added in today's format
+    (suites older than benchmarks/common.py wrote another; seeds came as ``--set``)."""
+    tree, site = worktree(commit)
+    out = WORK / f"{commit}-lines.jsonl"
+    before = len(common.read_lines(out))
+    seeded = (["--seeds", str(seed)] if (tree / "benchmarks" / "common.py").is_file()
+              else ["--set", f"train.seed={seed}"])
+    cmd = [sys.executable, str(tree / "benchmarks" / "run_suite.py"), "--scenes", name,
+           "--presets", "fast", "--minutes", str(args.minutes), *seeded,
+           "--assets", str(args.assets), "--cache", str(args.cache), "--out-runs",
+           str(args.out_runs), "--out", str(out), "--curve", "2", "--image-views", "0"]
+    # the site first: the worktree's package, not the one installed from this checkout
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(tree / "benchmarks")])}
+    subprocess.run(cmd, env=env, cwd=tree, check=False, stdout=subprocess.DEVNULL)
+    for line in common.read_lines(out)[before:]:
+        stamped = str(line.get("commit", "unknown"))
+        converted = {"bench": "suite", "machine": common.machine("cpu"), **line,
+                     "commit": stamped.removesuffix("+dirty"),
+                     "dirty": line.get("dirty", stamped.endswith("+dirty")), "seed": seed,
+                     "preset": "fast", "overrides": [], "iters": None,
+                     "command": f"python benchmarks/compare_commits.py {args.base} {args.new} "
+                     f"(fits with the commit's run_suite.py {' '.join(cmd[2:])})"}
+        common.append(args.out, converted)
+        print(f"[compare] {commit} {name} seed {seed}: CD {line.get('chamfer')}",
+              file=sys.stderr, flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 epilog="\n".join(__doc__.splitlines()[1:]))
+    ap.add_argument("base", help="the commit to compare with")
+    ap.add_argument("new", nargs="?", default="HEAD", help="the commit compared (default HEAD)")
+    ap.add_argument("--assets", type=Path, default=run_suite.DEFAULT_ASSETS)
+    ap.add_argument("--scenes", nargs="+", help="asset names (default: every asset; 'none')")
+    ap.add_argument("--generated", type=int, default=0, metavar="N")
+    ap.add_argument("--generated-seed", type=int, default=0)
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--minutes", type=float, default=15.0)
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
+    ap.add_argument("--out-runs", type=Path, default=WORK / "runs")
+    common.add_arguments(ap, "suite")
+    args = ap.parse_args()
+    resolve = ["git", "-C", str(common.REPO), "rev-parse", "--short"]
+    args.base, args.new = (subprocess.run([*resolve, c], capture_output=True, text=True,
+                                          check=True).stdout.strip()
+                           for c in (args.base, args.new))
+    assets = run_suite.find_assets(args.assets)
+    sources = list(assets) if args.scenes is None else [s for s in args.scenes if s != "none"]
+    if args.generated:
+        from hybridneus.simulate.generated import generated_set
+
+        sources += [f"generated:{k}:{s}" for k, s in generated_set(args.generated,
+                                                                   args.generated_seed)]
+    sim = argparse.Namespace(views=999, width=346, height=260, test_views=8, noise=(0.0, 0.0),
+                             cache=args.cache, assets=args.assets)
+    names = [run_suite.scene_name(s) for s in sources]
+    for source in sources:  # every dataset first, with today's simulator
+        run_suite.dataset_for(source, assets, sim)
+    args.out_runs.mkdir(parents=True, exist_ok=True)
+    k = 0
+    for name in names:
+        for seed in args.seeds:
+            for commit in ([args.base, args.new] if k % 2 == 0 else [args.new, args.base]):
+                run_at(args, commit, name, seed)
+            k += 1
+    print(json.dumps({"pairs": k, "base": args.base, "new": args.new}))
+
+
+if __name__ == "__main__":
+    main()
