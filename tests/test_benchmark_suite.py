@@ -118,6 +118,7 @@ def test_the_report_pairs_two_commits_and_leaves_dirty_lines_out(tmp_path, monke
     assert "| bunny | fast | 15 min | 2 | 0.0130 | 0.0120-0.0140 | 0.0120 |" in text
     assert "-7.7%" in text and "commit ccc" not in text and "0.5000" not in text
     assert "| gen-box-3 | 1 | 0.0200 |" in text
+    assert "| 9000 | 905 | - |" in text  # the longest wall time; no first-step time given
 
 
 def test_gpu_pack_carries_what_a_fit_reads_and_unpacks_returned_runs(tiny_scene, tmp_path):
