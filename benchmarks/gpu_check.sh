@@ -60,7 +60,7 @@ done
 ls -la "$OUT"
 
 echo "== 2. pytest -m gpu"
-timeout 90 $PY -m pytest -q -m gpu -p no:cacheprovider tests/test_grids.py \
+HYBRIDNEUS_TEST_SCENES=$PWD/$CARRY/test-scenes timeout 90 $PY -m pytest -q -m gpu -p no:cacheprovider tests/test_grids.py \
     tests/test_data_windows.py tests/test_training.py 2>&1 | tail -5
 
 first=$(ls -d "$CARRY"/*/ | head -1)

@@ -106,7 +106,23 @@ def main() -> None:
         size = pack(dataset, args.out)
         total += size
         print(f"{args.out / dataset.name}: {size / 2**20:.1f} MiB")
+    total += test_scenes(args.out / "test-scenes")
     print(f"total {total / 2**20:.1f} MiB (the transfer limit is 64 MiB with the working tree)")
+
+
+def test_scenes(out: Path) -> int:
+    """Simulate the GPU tests' scene here: the GPU machine has no Open3D to simulate it (the
+    tests copy it from ``$HYBRIDNEUS_TEST_SCENES``). Returns its bytes."""
+    sys.path.insert(0, str(common.REPO / "tests"))
+    from conftest import device_scene_name, simulate_device
+
+    args = (40, 48, 36, 1.5)  # the ``scene`` fixture's
+    dst = out / device_scene_name(*args)
+    if not dst.is_dir():
+        with atomic_dir(dst) as tmp:
+            tmp.rmdir()
+            simulate_device(tmp, *args)
+    return sum(f.stat().st_size for f in dst.rglob("*") if f.is_file())
 
 
 if __name__ == "__main__":

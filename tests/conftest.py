@@ -32,9 +32,28 @@ TINY_FIT = [
 TINY_SIZE = (24, 18)  # width, height
 
 
+#: A machine without the simulator's Open3D (a lent GPU machine) copies the scenes from this
+#: folder instead, simulated elsewhere by ``benchmarks/gpu_pack.py --test-scenes``.
+PRESIMULATED = "HYBRIDNEUS_TEST_SCENES"
+
+
+def device_scene_name(n_views: int, width: int, height: int, revolutions: float) -> str:
+    return f"device-{n_views}v-{width}x{height}-r{revolutions:g}"
+
+
 def simulate_device(out: Path, n_views: int, width: int, height: int, revolutions: float) -> Path:
     """The built-in ``device`` scene simulated into ``out`` (train split only, no supersampling)."""
+    import os
+    import shutil
+
     from hybridneus.simulate import SimulationConfig, simulate_dataset
+
+    if os.environ.get(PRESIMULATED):
+        src = Path(os.environ[PRESIMULATED]) / device_scene_name(n_views, width, height,
+                                                                 revolutions)
+        if src.is_dir():
+            shutil.copytree(src, out)
+            return out
 
     cfg = SimulationConfig(n_views=n_views, width=width, height=height, val_views=0,
                            test_views=0, revolutions=revolutions, supersample=1)
