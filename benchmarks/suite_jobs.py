@@ -81,6 +81,8 @@ def fit_run(job, started: float) -> Path:
         "inv_s": round(float(field.inv_s().detach()), 1),
         "fit_peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
         "machine": common.machine(job.device),  # where it was fitted, not where it is scored
+        # the fitted code, which a line scored later on another commit is credited to
+        **dict(zip(("commit", "dirty"), common.git_state(), strict=True)),
     }
     with atomic_path(run_dir / "fit.json") as tmp:
         tmp.write_text(json.dumps(info, indent=1))
