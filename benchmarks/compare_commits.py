@@ -2,7 +2,7 @@
 
 Fits every (scene, seed) with the ``fast`` preset at the base commit and at the new one (HEAD
 by default), one after the other, alternating which goes first, so that the machine's drift
-falls on both alike. Each commit runs from a worktree of its own (its benchmarks/run_suite.py
+falls on both alike; started again, it skips the fits already in ``--out``. Each commit runs from a worktree of its own (its benchmarks/run_suite.py
 and its package, from a tree of links laid out as pyproject.toml maps it, so nothing is
 installed and later commits to this checkout change nothing mid-run); their lines are added to
 benchmarks/results/suite.jsonl in today's format. ``python benchmarks/report.py --compare
@@ -72,6 +72,14 @@ def run_at(args, commit: str, name: str, seed: int) -> None:
               file=sys.stderr, flush=True)
 
 
+def done(args) -> set[tuple[str, str, int]]:
+    """(commit, scene, seed) of this comparison's fits already in ``--out``: a comparison
+    started again goes on where it stopped."""
+    return {(x["commit"], x["scene"], x["seed"]) for x in common.read_lines(args.out)
+            if x.get("bench") == "suite" and x.get("minutes") == args.minutes
+            and "compare_commits.py" in str(x.get("command", ""))}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -106,9 +114,13 @@ def main() -> None:
         run_suite.dataset_for(source, assets, sim)
     args.out_runs.mkdir(parents=True, exist_ok=True)
     k = 0
-    for name in names:
-        for seed in args.seeds:
+    for seed in args.seeds:  # seed-major: a comparison cut short still covers every scene
+        for name in names:
             for commit in ([args.base, args.new] if k % 2 == 0 else [args.new, args.base]):
+                if (commit, name, seed) in done(args):
+                    print(f"[compare] {commit} {name} seed {seed}: in {args.out} already",
+                          file=sys.stderr, flush=True)
+                    continue
                 run_at(args, commit, name, seed)
             k += 1
     print(json.dumps({"pairs": k, "base": args.base, "new": args.new}))

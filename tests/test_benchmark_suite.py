@@ -174,3 +174,21 @@ def test_docs_benchmarks_is_generated_from_the_result_lines():
     words = flags.split()
     compare = [(words[i + 1], words[i + 2]) for i, w in enumerate(words) if w == "--compare"]
     assert report.DOC.read_text() == report.build(compare), "rerun python benchmarks/report.py"
+
+
+def test_a_comparison_started_again_skips_the_fits_it_has(tmp_path):
+    import argparse
+
+    sys.path.insert(0, str(SUITE.parent))
+    import common
+    import compare_commits
+
+    out = tmp_path / "suite.jsonl"
+    args = argparse.Namespace(out=out, minutes=15.0)
+    assert compare_commits.done(args) == set()
+    ours = {"bench": "suite", "commit": "abc1234", "scene": "bunny", "seed": 1, "minutes": 15.0,
+            "command": "python benchmarks/compare_commits.py abc1234 def5678 (fits ...)"}
+    common.append(out, ours)
+    common.append(out, {**ours, "seed": 2, "minutes": 1.0})  # another comparison's length
+    common.append(out, {**ours, "seed": 0, "command": "python benchmarks/run_suite.py"})
+    assert compare_commits.done(args) == {("abc1234", "bunny", 1)}
