@@ -2,11 +2,11 @@
 
 Fits every (scene, seed) with the ``fast`` preset at the base commit and at the new one (HEAD
 by default), one after the other, alternating which goes first, so that the machine's drift
-falls on both alike; started again, it skips the fits already in ``--out``. Each commit runs from a worktree of its own (its benchmarks/run_suite.py
-and its package, from a tree of links laid out as pyproject.toml maps it, so nothing is
-installed and later commits to this checkout change nothing mid-run); their lines are added to
-benchmarks/results/suite.jsonl in today's format. ``python benchmarks/report.py --compare
-BASE NEW`` then pairs them.
+falls on both alike; started again, it skips the fits already in ``--out``. Each commit runs
+from a worktree of its own (its benchmarks/run_suite.py and its package, from a tree of links
+laid out as pyproject.toml maps it, so nothing is installed and later commits to this checkout
+change nothing mid-run); their lines are added to benchmarks/results/suite.jsonl in today's
+format. ``python benchmarks/report.py --compare BASE NEW`` then pairs them.
 
     python benchmarks/compare_commits.py cf67ae4 --seeds 0 1 2
     python benchmarks/compare_commits.py cf67ae4 --scenes none --generated 6 --generated-seed 2026
