@@ -127,7 +127,7 @@ def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
 def speed_section(results: dict[str, list[dict]]) -> list[str]:
     """The latest clean line of each speed benchmark's measurements."""
     out = ["## Speed", "", "The latest line of each measurement; timings are medians, and "
-           "machines differ by 2x between days, so compare only figures of one line.", ""]
+           "machines differ by 2x between days, so compare only the figures of one table.", ""]
     rows = results.get("startup", [])
     if rows:
         out += ["### From `hybridneus fit` to the first step", "",
@@ -143,16 +143,51 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
                          ("data", "Data"), ("simulate", "Simulation")):
-        rows = results.get(bench, [])
-        if not rows:
-            continue
-        out += [f"### {title}", ""]
-        for r in rows[-8:]:
-            fields = {k: v for k, v in r.items() if k not in (
-                "bench", "commit", "dirty", "date", "machine", "command", "threads")}
-            out.append(f"- {r['date'][:10]}, {r['commit']}, {_cpu(r)}: `{fields}`")
-        out += ["", f"Command: `{rows[-1]['command']}`", ""]
+        by_machine: dict[str, list[dict]] = defaultdict(list)
+        for r in results.get(bench, []):
+            by_machine[_cpu(r)].append(r)
+        for cpu, rows in by_machine.items():
+            # the latest run on each machine: the lines of its command and commit
+            last = rows[-1]
+            rows = [r for r in rows if (r["commit"], r["command"]) == (last["commit"],
+                                                                       last["command"])]
+            out += [f"### {title}: {cpu}, commit {last['commit']}, {last['date'][:10]}", "",
+                    *_table(rows), "", f"Command: `{last['command']}`", ""]
     return out
+
+
+_STAMP = ("bench", "commit", "dirty", "date", "machine", "command", "threads")
+
+
+def _flat(line: dict) -> dict:
+    """A line's own fields, nested dicts one column per key (``mpoints_per_s ours-joined``)."""
+    out = {}
+    for k, v in line.items():
+        if k in _STAMP:
+            continue
+        if isinstance(v, dict):
+            out.update({f"{k} {kk}": vv for kk, vv in v.items()})
+        else:
+            out[k] = v
+    return out
+
+
+def _cell(v) -> str:
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, list):
+        return ", ".join(_cell(x) for x in v)
+    return "-" if v is None else str(v)
+
+
+def _table(rows: list[dict]) -> list[str]:
+    flat = [_flat(r) for r in rows]
+    cols = list(dict.fromkeys(k for f in flat for k in f))
+    return [f"| {' | '.join(c.replace('_', ' ') for c in cols)} |",
+            f"|{'---|' * len(cols)}",
+            *(f"| {' | '.join(_cell(f.get(c)) for c in cols)} |" for f in flat)]
 
 
 def build(compare: list[tuple[str, str]]) -> str:

@@ -192,3 +192,15 @@ def test_a_comparison_started_again_skips_the_fits_it_has(tmp_path):
     common.append(out, {**ours, "seed": 2, "minutes": 1.0})  # another comparison's length
     common.append(out, {**ours, "seed": 0, "command": "python benchmarks/run_suite.py"})
     assert compare_commits.done(args) == {("abc1234", "bunny", 1)}
+
+
+def test_speed_tables_give_each_field_a_column():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    rows = [{"bench": "grids", "commit": "abc1234", "mode": "fwd", "rate": {"a": 1.5, "b": 2.0},
+             "ok": True},
+            {"bench": "grids", "commit": "abc1234", "mode": "eikonal", "rate": {"a": 0.25}}]
+    header, _, first, second = report._table(rows)
+    assert header == "| mode | rate a | rate b | ok |"
+    assert first == "| fwd | 1.5 | 2 | yes |" and second == "| eikonal | 0.25 | - | - |"
