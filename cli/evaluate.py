@@ -25,6 +25,14 @@ def evaluate(
         str, typer.Option("--sign", help="Inside test: auto, winding or rays.")
     ] = "auto",
     no_sdf: Annotated[bool, typer.Option("--no-sdf", help="Skip SDF-MAE.")] = False,
+    errors: Annotated[
+        Path | None,
+        typer.Option("--errors", help="Also write a PNG: GT coloured by its distance to the "
+                     "mesh above the mesh coloured by its distance to GT."),
+    ] = None,
+    error_max: Annotated[
+        float, typer.Option("--error-max", help="Distance (unit cube) shown in the last colour.")
+    ] = 0.02,
 ) -> None:
     """Compare MESH with GT by the EventNeuS protocol (both in GT's unit cube)."""
     import json
@@ -39,6 +47,8 @@ def evaluate(
         raise ConfigError(f"--samples {samples}: expected at least 2")
     if sign not in SIGN_METHODS:
         raise ConfigError(f"--sign {sign}: expected one of {', '.join(SIGN_METHODS)}")
+    if error_max <= 0:
+        raise ConfigError(f"--error-max {error_max}: expected a positive distance")
     pred_mesh = load_mesh(mesh)
     gt_mesh = load_mesh(gt)
     start = time.perf_counter()
@@ -51,6 +61,10 @@ def evaluate(
             {"sdf_mae": mae.mae, "sdf_mae_near": mae.mae_near, "sdf_mae_uniform": mae.mae_uniform}
         )
     result["seconds"] = round(time.perf_counter() - start, 3)
+    if errors is not None:
+        from hybridneus.evaluation import save_error_image
+
+        result["errors"] = str(save_error_image(pred_mesh, gt_mesh, errors, vmax=error_max))
     if json_out:
         typer.echo(json.dumps(result, indent=2))
         return
@@ -71,3 +85,5 @@ def evaluate(
         if key in result:
             table.add_row(label, f"{result[key]:.5f}")
     Console().print(table)
+    if errors is not None:
+        typer.echo(f"error picture: {result['errors']}")

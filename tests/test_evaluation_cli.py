@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import trimesh
 
@@ -57,3 +58,29 @@ def test_eval_bad_input_exits_2_with_one_line(tmp_path, cli):
     assert err.startswith("error: ") and "bad.ply" in err
     code, _, err = cli(str(gt), str(gt), "--sign", "parity")
     assert code == 2 and "--sign parity" in err
+
+
+def test_eval_errors_draws_a_floater_in_the_last_colour(tmp_path, cli):
+    from PIL import Image
+
+    from hybridneus.evaluation import vertex_errors
+
+    gt = trimesh.creation.box(extents=(0.6, 0.6, 0.6))
+    floater = trimesh.creation.icosphere(subdivisions=2, radius=0.05)
+    floater.apply_translation((0.0, 0.6, 0.0))  # 0.3 above the top face
+    pred = trimesh.util.concatenate([gt, floater])
+    errors = vertex_errors(pred, gt)
+    assert errors[: len(gt.vertices)].max() < 1e-6 and errors[len(gt.vertices):].min() > 0.2 - 1e-6
+    gt.export(tmp_path / "gt.ply")
+    pred.export(tmp_path / "pred.ply")
+    png = tmp_path / "err" / "errors.png"
+    code, stdout, stderr = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--json",
+                               "--samples", "1000", "--no-sdf", "--errors", str(png))
+    assert code == 0, stderr and json.loads(stdout)["errors"] == str(png)
+    image = np.asarray(Image.open(png)).astype(int)
+    r, g, b = image[..., 0], image[..., 1], image[..., 2]
+    red = (r > 100) & (r > 3 * g) & (r > 3 * b)  # the scale's top end: the floater only
+    top, bottom = red[:256], red[256:512]  # two rows of 256-pixel views, then the scale
+    assert bottom.sum() > 20 and top.sum() == 0
+    code, _, err = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--error-max", "0")
+    assert code == 2 and "--error-max 0" in err

@@ -1,4 +1,5 @@
-"""Metrics: Chamfer distance / F-score and SDF-MAE between meshes, PSNR / SSIM of images.
+"""Metrics: Chamfer distance / F-score and SDF-MAE between meshes, PSNR / SSIM of images; pictures
+of where a mesh is wrong.
 
 Public API::
 
@@ -7,6 +8,7 @@ Public API::
 See docs/evaluation.md for the exact protocols.
 """
 
+from hybridneus.evaluation.error_map import error_image, save_error_image, vertex_errors
 from hybridneus.evaluation.geometry import (
     ChamferResult,
     SdfMaeResult,
@@ -38,15 +40,18 @@ __all__ = [
     "apply_log_color_correction",
     "chamfer_distance",
     "color_corrected_psnr_ssim",
+    "error_image",
     "fit_log_color_correction",
     "inside_mask",
     "normalize_pair",
     "psnr",
+    "save_error_image",
     "sdf_mae",
     "signed_distance",
     "ssim",
     "unit_cube_transform",
     "unsigned_distance",
+    "vertex_errors",
     "winding_number",
     "winding_number_exact",
 ]

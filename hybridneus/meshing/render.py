@@ -26,11 +26,14 @@ def render_views(
     azimuths: tuple[float, ...] = (30.0, 120.0, 210.0, 300.0),
     elevation: float = 20.0,
     background: float = 1.0,
+    frame: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """Shaded orthographic views side by side -> (size, size * n_views, 3) uint8.
 
     Views orbit the world y axis (the datasets' up axis); colour is the vertex colour
     (barycentric blend) when present, else light grey, times a head-light Lambert term.
+    ``frame`` (centre (3,), half-width of the view) frames another mesh's views alike; by
+    default the mesh's own bounding box fills the view.
     """
     import open3d as o3d
 
@@ -43,8 +46,11 @@ def render_views(
     colors = None
     if mesh.visual.kind == "vertex":
         colors = np.asarray(mesh.visual.vertex_colors)[:, :3].astype(np.float64) / 255.0
-    centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-    half = 0.55 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    if frame is None:
+        centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+        half = 0.55 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    else:
+        centre, half = np.asarray(frame[0], dtype=np.float64), float(frame[1])
     span = np.linspace(-half, half, size)
     u, v = np.meshgrid(span, -span)
     tiles = []
