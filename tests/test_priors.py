@@ -84,6 +84,30 @@ def test_curvature_weight_falls_linearly_to_zero_by_its_end(scene):
     assert "loss/curvature" in logs and logs["loss/curvature"] > 0
 
 
+def test_curvature_event_weight_leaves_rays_that_fired_to_the_data(scene):
+    """``event_weight`` scales the rays whose pixels fired; 1 treats every ray alike."""
+    from types import SimpleNamespace
+
+    trainer, _ = prepare(scene, tiny("train.iters=1"), device="cpu")
+    target = torch.tensor([0.0, 0.4, -0.2, 0.0])
+    ctx = SimpleNamespace(batch=SimpleNamespace(target=target), origins=torch.zeros(8, 3))
+    alike = CurvaturePrior(tiny().priors.curvature)
+    assert alike.ray_weights(ctx) == 1.0
+    silent = CurvaturePrior(tiny("priors.curvature.event_weight=0.1").priors.curvature)
+    assert silent.ray_weights(ctx).tolist() == pytest.approx([1, 0.1, 0.1, 1] * 2)
+    # in a step: with weight 0 and every pixel firing, nothing is left to smooth
+    only_silent = tiny("train.iters=1", "priors.curvature.event_weight=0",
+                       "data.neg_ratio=0")
+    trainer, _ = prepare(scene, only_silent, device="cpu")
+    batch = trainer.windows.sample(64)
+    assert bool((batch.target != 0).all())
+    trainer.next_batch = lambda: batch
+    assert trainer.train_step()["loss/curvature"] == 0.0
+    trainer, _ = prepare(scene, tiny("train.iters=1", "data.neg_ratio=0"), device="cpu")
+    trainer.next_batch = lambda: batch
+    assert trainer.train_step()["loss/curvature"] > 0.0
+
+
 # --------------------------------------------------------------------------- sharpness floor
 
 
@@ -160,7 +184,8 @@ def test_hull_weight_grows_over_its_ramp(scene):
     hull = _prior(trainer, HullPrior)
     pts = random_points(trainer.aabb, 512, 0.15, trainer.generator)
     random = RandomPoints(pts, trainer.field.raw_sdf(pts), torch.zeros(512, dtype=torch.bool))
-    ctx = StepContext(trainer.field, None, None, None, 0.0, trainer.generator, random)
+    ctx = StepContext(trainer.field, None, None, None, 0.0, trainer.generator,
+                      random=random)
     weights = []
     for p in (0.0, 0.25, 0.5, 0.9):
         ctx.p = p

@@ -177,7 +177,9 @@ class CurvaturePrior:
 
     Assumes surfaces are smooth at the scale of ``step``: the term penalises the change of
     the normal between each rendered surface point and a point ``step`` away. A flat face of
-    one colour fires events only along its outline, and without the term it wrinkles. Costs
+    one colour fires events only along its outline, and without the term it wrinkles; where
+    pixels fire, the events speak for the shape themselves, and ``event_weight`` below 1
+    leaves those rays more to the data. Costs
     one extra SDF gradient pass on two points per ray. Its weight falls to 0 by ``end``, so
     that late training gives fine detail back to the data; switch it off for objects made
     of fine detail (fur, foliage).
@@ -187,6 +189,7 @@ class CurvaturePrior:
     weight: float = 0.05  # weight of the mean squared normal change
     step: float = 0.01  # distance to the shifted point (world units)
     end: float = 0.5  # fraction of training at which the weight has fallen to 0 (0: constant)
+    event_weight: float = 1.0  # weight of rays whose pixels fired, against 1 for silent ones
 
 
 @dataclass

@@ -179,7 +179,7 @@ class Trainer:
         origins, dirs = batch_rays(batch)
         out = render_rays(self.field, origins, dirs, self.sampler, self.generator, True,
                           cfg.render.crop_softness)
-        ctx = StepContext(self.field, out, origins, dirs, p, self.generator)
+        ctx = StepContext(self.field, out, origins, dirs, p, self.generator, batch)
         terms = self.objective(ctx, batch, self.tonemap_eps())
         total = sum(weight * value for weight, value in terms.values())
         self.optimizer.zero_grad(set_to_none=True)

@@ -50,6 +50,8 @@ class StepContext:
         dirs: (n_rays, 3) unit directions.
         p: training progress of the step, in [0, 1].
         generator: the trainer's random generator (on the field's device).
+        batch: the step's batch (:class:`~hybridneus.data.windows.RayBatch`, or a frame
+            batch under RGB supervision), or ``None``.
         random: the random volume points, or ``None`` when no term asked for them.
         eikonal: SDF gradient blocks for the Eikonal term, each with per-point weights
             (``None``: all count); a term that evaluates gradients appends its own.
@@ -61,6 +63,7 @@ class StepContext:
     dirs: torch.Tensor
     p: float
     generator: torch.Generator
+    batch: Any = None
     random: RandomPoints | None = None
     eikonal: list[tuple[torch.Tensor, torch.Tensor | None]] = field(default_factory=list)
 
