@@ -25,6 +25,10 @@ def evaluate(
         str, typer.Option("--sign", help="Inside test: auto, winding or rays.")
     ] = "auto",
     no_sdf: Annotated[bool, typer.Option("--no-sdf", help="Skip SDF-MAE.")] = False,
+    parts: Annotated[
+        bool, typer.Option("--parts", help="Also say how much of each connected part of GT "
+                           "the mesh recovers (recall at --threshold, mean distance).")
+    ] = False,
     errors: Annotated[
         Path | None,
         typer.Option("--errors", help="Also write a PNG: GT coloured by its distance to the "
@@ -60,6 +64,11 @@ def evaluate(
         result.update(
             {"sdf_mae": mae.mae, "sdf_mae_near": mae.mae_near, "sdf_mae_uniform": mae.mae_uniform}
         )
+    if parts:
+        from hybridneus.evaluation.parts import part_completeness
+
+        result["parts"] = [p.as_dict() for p in part_completeness(
+            pred_mesh, gt_mesh, threshold=threshold, n_samples=2 * samples, seed=seed)]
     result["seconds"] = round(time.perf_counter() - start, 3)
     if errors is not None:
         from hybridneus.evaluation import save_error_image
@@ -85,5 +94,14 @@ def evaluate(
         if key in result:
             table.add_row(label, f"{result[key]:.5f}")
     Console().print(table)
+    if parts:
+        by_part = Table(title=f"GT parts, largest first (recall: share within {threshold:g})")
+        for column in ("part", "area", "extents", "recall", "mean distance"):
+            by_part.add_column(column, justify="right")
+        for p in result["parts"]:
+            by_part.add_row(str(p["index"]), f"{p['area']:.4f}",
+                            " x ".join(f"{e:.3f}" for e in p["extents"]),
+                            f"{p['recall']:.2f}", f"{p['completeness']:.4f}")
+        Console().print(by_part)
     if errors is not None:
         typer.echo(f"error picture: {result['errors']}")

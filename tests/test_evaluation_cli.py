@@ -84,3 +84,22 @@ def test_eval_errors_draws_a_floater_in_the_last_colour(tmp_path, cli):
     assert bottom.sum() > 20 and top.sum() == 0
     code, _, err = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--error-max", "0")
     assert code == 2 and "--error-max 0" in err
+
+
+def test_eval_parts_says_which_part_is_missing(tmp_path, cli):
+    body = trimesh.creation.box(extents=(0.6, 0.6, 0.6))
+    wire = trimesh.creation.cylinder(radius=0.01, height=0.8)
+    wire.apply_translation((0.6, 0.0, 0.0))
+    trimesh.util.concatenate([body, wire]).export(tmp_path / "gt.ply")
+    body.export(tmp_path / "pred.ply")  # the wire is lost
+    code, stdout, stderr = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--json",
+                               "--samples", "1000", "--no-sdf", "--parts")
+    assert code == 0, stderr
+    parts = json.loads(stdout)["parts"]
+    assert [p["index"] for p in parts] == [0, 1] and parts[0]["area"] > parts[1]["area"]
+    assert parts[0]["recall"] == 1.0 and parts[0]["completeness"] < 1e-6
+    assert parts[1]["recall"] == 0.0 and parts[1]["completeness"] > 0.1
+    assert parts[1]["samples"] >= 200  # a thin part is measured too
+    code, stdout, _ = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--samples",
+                          "500", "--no-sdf", "--parts")
+    assert code == 0 and "GT parts" in stdout

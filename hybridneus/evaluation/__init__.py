@@ -8,7 +8,12 @@ Public API::
 See docs/evaluation.md for the exact protocols.
 """
 
-from hybridneus.evaluation.error_map import error_image, save_error_image, vertex_errors
+from hybridneus.evaluation.error_map import (
+    error_image,
+    save_error_image,
+    surface_distance,
+    vertex_errors,
+)
 from hybridneus.evaluation.geometry import (
     ChamferResult,
     SdfMaeResult,
@@ -32,10 +37,12 @@ from hybridneus.evaluation.inside import (
     winding_number,
     winding_number_exact,
 )
+from hybridneus.evaluation.parts import PartResult, part_completeness
 
 __all__ = [
     "ChamferResult",
     "ImageMetrics",
+    "PartResult",
     "SdfMaeResult",
     "apply_log_color_correction",
     "chamfer_distance",
@@ -44,11 +51,13 @@ __all__ = [
     "fit_log_color_correction",
     "inside_mask",
     "normalize_pair",
+    "part_completeness",
     "psnr",
     "save_error_image",
     "sdf_mae",
     "signed_distance",
     "ssim",
+    "surface_distance",
     "unit_cube_transform",
     "unsigned_distance",
     "vertex_errors",
