@@ -172,6 +172,46 @@ def test_per_iteration_window_distribution(tmp_path):
     assert set(views.astype(int)) == set(range(21))
 
 
+def _looking_from(directions: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) poses whose forward axes are ``-directions`` (only the axes matter here)."""
+    c2w = np.tile(np.eye(4), (len(directions), 1, 1))
+    c2w[:, :3, 2] = -directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    return c2w
+
+
+def test_direction_weights_even_out_a_bunched_path():
+    from hybridneus.data.windows import direction_weights
+
+    rng = np.random.default_rng(0)
+    bunched = np.array([1.0, 0.0, 0.0]) + 0.005 * rng.normal(size=(90, 3))  # within a degree
+    angles = np.deg2rad(20.0 * np.arange(1, 11))
+    spread = np.stack([np.cos(angles), np.sin(angles), np.zeros(10)], axis=1)  # 20 deg apart
+    w = direction_weights(_looking_from(np.concatenate([bunched, spread])))
+    assert w.sum() == pytest.approx(1.0) and (w > 0).all()
+    assert w[:90].sum() == pytest.approx(1 / 11) and w[90:] == pytest.approx([1 / 11] * 10)
+
+
+def test_view_balance_draws_end_views_by_direction(tmp_path):
+    from hybridneus.data.windows import direction_weights
+
+    ds = _split(tmp_path, random_events(500, 21), n_views=21, max_window=5)
+    sp = ds.splits["train"]
+    directions = np.zeros((21, 3))
+    directions[:16] = [1.0, 0.0, 0.0]  # views 0..15 look alike
+    angles = np.deg2rad(30.0 * np.arange(1, 6))
+    directions[16:] = np.stack([np.cos(angles), np.sin(angles), np.zeros(5)], axis=1)
+    sp = replace(sp, c2w=_looking_from(directions))
+    uniform = EventWindowSampler(sp, ds.preset, seed=0)
+    assert uniform.view_p is None  # the default draws as before: every view alike
+    half = EventWindowSampler(sp, ds.preset, seed=0, view_balance=0.5)
+    assert ds.preset.cyclic and list(half.views) == list(range(21))  # every view is drawn
+    np.testing.assert_allclose(half.view_p, 0.5 / 21 + 0.5 * direction_weights(sp.c2w))
+    draws = np.array([half.draw_window()[0] for _ in range(4000)])
+    lone = np.isin(draws, np.arange(16, 21)).mean()  # 5 views of 21, each its own direction
+    expected = 0.5 * 5 / 21 + 0.5 * 5 / 6
+    assert abs(lone - expected) < 0.03 and expected > 2 * 5 / 21
+
+
 def test_non_cyclic_windows_clamped(tmp_path):
     ds = _split(tmp_path, random_events(500, 11), n_views=11, group="nerf/lego")
     assert ds.preset.cyclic is False

@@ -103,6 +103,7 @@ class TrainConfig:
     preview_every: int = 500  # steps between preview PNGs (0: never)
     checkpoint_every: int = 500  # steps between checkpoints (and always at the end)
     window: str = "per_iteration"  # event-window sampling: per_iteration | per_load
+    view_balance: float = 0.0  # share of windows drawn evenly over viewing directions
     supervision: str = "events"  # events, or rgb: the rgb/ frames (2 * n_rays pixels per step)
 
 

@@ -189,6 +189,25 @@ class RayBatch:
         return int(self.target.shape[0])
 
 
+def direction_weights(c2w: np.ndarray, radius_deg: float = 10.0) -> np.ndarray:
+    """(n_views,) weights summing to 1 that even out the viewing directions of ``c2w``
+    (n_views, 4, 4): each view's is 1 over the number of views looking within
+    ``radius_deg`` of its direction.
+
+    A Seiffert spiral (EventNeRF's synthetic path) circles near the equator for most of the
+    capture, so faces that only high views see well, such as the top of a flat object, get a
+    small share of uniformly drawn windows; these weights give every part of the path a share
+    by the directions it covers, not by its views.
+    """
+    from scipy.spatial import cKDTree
+
+    forward = c2w[:, :3, 2] / np.linalg.norm(c2w[:, :3, 2], axis=1, keepdims=True)
+    chord = 2.0 * np.sin(np.deg2rad(radius_deg) / 2.0)  # the angle as a distance on the sphere
+    near = cKDTree(forward).query_ball_point(forward, chord, return_length=True)
+    weights = 1.0 / np.maximum(near, 1)
+    return weights / weights.sum()
+
+
 class EventWindowSampler:
     """Draws event windows and ray batches from one split.
 
@@ -200,6 +219,8 @@ class EventWindowSampler:
             as the EventNeuS paper) or ``"per_load"`` (integer length in 1..max_window drawn
             once per view, as the EventNeRF reference code).
         device: device of the returned tensors.
+        view_balance: share of windows whose end view is drawn with :func:`direction_weights`
+            (even over viewing directions) instead of uniformly over views.
 
     Raises:
         DatasetError: the split has fewer than 2 views.
@@ -217,6 +238,7 @@ class EventWindowSampler:
         seed: int = 0,
         window: Literal["per_iteration", "per_load"] = "per_iteration",
         device: str | torch.device = "cpu",
+        view_balance: float = 0.0,
     ) -> None:
         if window not in ("per_iteration", "per_load"):
             raise ConfigError(f"window: expected 'per_iteration' or 'per_load', got {window!r}")
@@ -235,10 +257,14 @@ class EventWindowSampler:
         self.per_load_len = self.rng.integers(1, preset.max_window + 1, size=self.n_views)
         first = 0 if preset.cyclic else 1
         self.views = np.arange(first, self.n_views)
+        self.view_p = None  # uniform
+        if view_balance > 0:
+            even = direction_weights(split.c2w[first:])
+            self.view_p = (1.0 - view_balance) / len(self.views) + view_balance * even
 
     def draw_window(self) -> tuple[int, float, float]:
         """Pick a view and a window: ``(view1, t0, t1)`` (``t0 < 0`` means it wraps)."""
-        i = int(self.rng.choice(self.views))
+        i = int(self.rng.choice(self.views, p=self.view_p))
         t1 = i * self.dt
         if self.window == "per_iteration":
             t0 = t1 - self.l_max + self.rng.random() * self.l_max

@@ -102,7 +102,8 @@ class Trainer:
             near_min=r.near_min, chunk=r.chunk,
         )
         self.windows = EventWindowSampler(self.split, self.preset, seed=cfg.train.seed,
-                                          window=cfg.train.window, device=self.device)
+                                          window=cfg.train.window, device=self.device,
+                                          view_balance=cfg.train.view_balance)
         self.frames = None
         if cfg.train.supervision == "rgb":
             from hybridneus.data.frames import FrameRaySampler
