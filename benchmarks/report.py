@@ -62,9 +62,11 @@ def suite_section(lines: list[dict]) -> list[str]:
         for r in rows:
             by_scene[r["scene"]].append(r)
         dates = sorted(r["date"][:10] for r in rows)
+        fitted = rows[-1].get("fit_command")
+        how = (f"fitted by `{fitted}`, scored by `{rows[-1]['command']}`"
+               if fitted and fitted != rows[-1]["command"] else f"command: `{rows[-1]['command']}`")
         out += [f"### `{preset}`, {budget}, commit {commit}, {cpu}", "",
-                f"{len(rows)} fits, {dates[0]} to {dates[-1]}; command: "
-                f"`{rows[-1]['command']}`", "",
+                f"{len(rows)} fits, {dates[0]} to {dates[-1]}; {how}", "",
                 "| scene | seeds | CD mean | CD range | F@1% | steps | longest wall s "
                 "| first step s |",
                 "|---|---|---|---|---|---|---|---|"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -100,6 +101,10 @@ def dataset_for(source: str, assets: dict[str, Path], args) -> Path:
     return folder
 
 
+#: The suite command a child fits for (kept in fit.json as ``fit_command``).
+FIT_COMMAND = "HYBRIDNEUS_FIT_COMMAND"
+
+
 def launch(args, name: str, dataset: Path, spec: str, seed: int) -> dict | None:
     """Fit (and unless ``--fit-only`` score) one run in a child process; append its line.
 
@@ -118,7 +123,9 @@ def launch(args, name: str, dataset: Path, spec: str, seed: int) -> dict | None:
     budget = f"{args.minutes:g} min" if args.minutes else f"{args.iters} steps"
     print(f"[suite] {name} {spec} seed {seed}, {budget} on {args.device}", file=sys.stderr,
           flush=True)
-    proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
+    # the child records the command that fitted it, for a line scored later by another one
+    env = {**os.environ, FIT_COMMAND: os.environ.get(FIT_COMMAND) or common.stamp(None)["command"]}
+    proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True, env=env)
     if proc.returncode != 0:
         print(f"[suite] {name} {spec} seed {seed}: the fit failed (exit {proc.returncode}); "
               "skipped", file=sys.stderr, flush=True)

@@ -64,6 +64,8 @@ def test_fit_only_then_score_runs_elsewhere(tiny_scene, tmp_path):
     assert (moved / "mesh.ply").is_file() == (line["chamfer"] is not None)
     # scored with and without each mesh clean-up, and stamped
     assert {"chamfer_unfilled", "chamfer_cavities", "commit", "date", "machine"} <= set(line)
+    # the command that fitted it, beside the one that scored it
+    assert "--fit-only" in line["fit_command"] and "--score-runs" in line["command"]
     sys.path.insert(0, str(SUITE.parent))
     import common
 
