@@ -7,6 +7,7 @@ table of two commits' fits paired by scene, seed, preset and budget on the same 
 
     python benchmarks/report.py                                  # writes docs/benchmarks.md
     python benchmarks/report.py --compare cf67ae4 4d2c1e0 --check
+    python benchmarks/report.py --readme 4d2c1e0     # and README.md's results table
 """
 
 from __future__ import annotations
@@ -104,7 +105,8 @@ def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
            "The same fits on the same machine, run interleaved; per scene the mean over seeds "
            "and the range.", "",
            "| scene | preset | budget | seeds | CD " + base + " | range | CD " + new
-           + " | range | change |", "|---|---|---|---|---|---|---|---|---|"]
+           + " | range | change | worse beyond the spread |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple, list[tuple]] = defaultdict(list)
     for k in pairs:
         groups[(k[0], k[2], k[3])].append((a[k].get("chamfer"), b[k].get("chamfer")))
@@ -116,14 +118,60 @@ def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
             continue
         mx, my = statistics.mean(xs), statistics.mean(ys)
         totals["generated" if scene.startswith("gen-") else "assets"].append((mx, my))
+        # worse by more than either commit's seed spread (a single seed has none to go by)
+        spread = max(max(xs) - min(xs), max(ys) - min(ys))
+        beyond = "-" if len(xs) < 2 else ("yes" if my - mx > spread else "no")
         out.append(f"| {scene} | {preset} | {budget} | {len(xs)} | {mx:.4f} | {_spread(xs)} | "
-                   f"{my:.4f} | {_spread(ys)} | {100 * (my / mx - 1):+.1f}% |")
+                   f"{my:.4f} | {_spread(ys)} | {100 * (my / mx - 1):+.1f}% | {beyond} |")
     for name, values in totals.items():
         mx = statistics.mean(x for x, _ in values)
         my = statistics.mean(y for _, y in values)
         out.append(f"| **mean, {name}** | | | | **{mx:.4f}** | | **{my:.4f}** | | "
-                   f"{100 * (my / mx - 1):+.1f}% |")
+                   f"{100 * (my / mx - 1):+.1f}% | |")
     return [*out, ""]
+
+
+README = common.REPO / "README.md"
+README_START = "<!-- results: python benchmarks/report.py --readme "
+README_END = "<!-- end of results -->"
+
+
+def readme_block(lines: list[dict], commit: str) -> list[str]:
+    """The README's results table: every suite group of one commit, one row each."""
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in lines:
+        if r["commit"] == commit:
+            groups[(r["preset"], _budget(r), _cpu(r))].append(r)
+    out = ["| preset | budget | machine | assets: mean CD | generated: mean CD | steps |",
+           "|---|---|---|---|---|---|"]
+    for (preset, budget, cpu), rows in sorted(groups.items()):
+        cells = []
+        for generated in (False, True):
+            rs = [r for r in rows if r["scene"].startswith("gen-") == generated
+                  and r.get("chamfer") is not None]
+            scenes = {r["scene"] for r in rs}
+            seeds = {r["seed"] for r in rs}
+            cells.append("-" if not rs else
+                         f"{statistics.mean(r['chamfer'] for r in rs):.4f} "
+                         f"({_count(len(scenes), 'object' if generated else 'asset')}, "
+                         f"{_count(len(seeds), 'seed')})")
+        steps = [r["steps"] for r in rows]
+        out.append(f"| `{preset}` | {budget} | {cpu} | {cells[0]} | {cells[1]} | "
+                   f"{min(steps)}-{max(steps)} |")
+    return out
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'s' if n != 1 else ''}"
+
+
+def readme_text(readme: str, lines: list[dict]) -> str:
+    """``readme`` with its results block regenerated for the commit its marker names."""
+    start = readme.index(README_START)
+    commit = readme[start + len(README_START):].split(" ", 1)[0]
+    head_end = readme.index("\n", start) + 1
+    end = readme.index(README_END)
+    return readme[:head_end] + "\n".join(readme_block(lines, commit)) + "\n" + readme[end:]
 
 
 def speed_section(results: dict[str, list[dict]]) -> list[str]:
@@ -218,7 +266,18 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=DOC)
     ap.add_argument("--check", action="store_true",
                     help="exit 1 if the page differs from what the lines give")
+    ap.add_argument("--readme", metavar="COMMIT",
+                    help="also write README.md's results table from COMMIT's suite lines")
     args = ap.parse_args()
+    if args.readme:
+        readme = README.read_text()
+        start = readme.index(README_START) + len(README_START)
+        end = readme.index(" ", start)
+        readme = readme[:start] + args.readme + readme[end:]
+        suite = [r for r in common.read_lines(common.RESULTS / "suite.jsonl")
+                 if not r.get("dirty")]
+        README.write_text(readme_text(readme, suite))
+        print(f"wrote {README}'s results for {args.readme}")
     text = build([tuple(c) for c in args.compare])
     if args.check:
         same = args.out.is_file() and args.out.read_text() == text

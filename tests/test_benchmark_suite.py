@@ -206,3 +206,28 @@ def test_speed_tables_give_each_field_a_column():
     header, _, first, second = report._table(rows)
     assert header == "| mode | rate a | rate b | ok |"
     assert first == "| fwd | 1.5 | 2 | yes |" and second == "| eikonal | 0.25 | - | - |"
+
+
+def test_readme_results_are_generated_from_one_commits_lines():
+    sys.path.insert(0, str(SUITE.parent))
+    import common
+    import report
+
+    lines = [r for r in common.read_lines(common.RESULTS / "suite.jsonl") if not r.get("dirty")]
+    readme = report.README.read_text()
+    assert readme == report.readme_text(readme, lines), "rerun benchmarks/report.py --readme"
+
+
+def test_readme_block_rows_summarise_assets_and_generated_objects():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    base = {"commit": "abc1234", "preset": "fast", "minutes": 15.0, "threads": 2,
+            "machine": {"cpu": "X"}, "steps": 100}
+    lines = [{**base, "scene": "bunny", "seed": 0, "chamfer": 0.01},
+             {**base, "scene": "bunny", "seed": 1, "chamfer": 0.03},
+             {**base, "scene": "gen-box-7", "seed": 0, "chamfer": 0.05, "steps": 90},
+             {**base, "scene": "bunny", "seed": 0, "chamfer": 0.5, "commit": "other"}]
+    _, _, row = report.readme_block(lines, "abc1234")
+    assert row == ("| `fast` | 15 min | X, 2 threads | 0.0200 (1 asset, 2 seeds) | "
+                   "0.0500 (1 object, 1 seed) | 90-100 |")
