@@ -91,7 +91,17 @@ def stamp(threads: int | None, device: str = "cpu") -> dict[str, Any]:
     return {"commit": commit, "dirty": dirty,
             "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "threads": threads, "machine": machine(device),
-            "command": " ".join(shlex.quote(a) for a in ["python", *_script_args()])}
+            "command": command()}
+
+
+#: The suite command a fit was made for, handed to its child process and kept in fit.json
+#: (a line scored later, by another command, names both).
+FIT_COMMAND = "HYBRIDNEUS_FIT_COMMAND"
+
+
+def command() -> str:
+    """This process's command line, as a result line records it."""
+    return " ".join(shlex.quote(a) for a in ["python", *_script_args()])
 
 
 def _script_args() -> list[str]:

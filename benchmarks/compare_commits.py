@@ -113,11 +113,12 @@ def main() -> None:
     for source in sources:  # every dataset first, with today's simulator
         run_suite.dataset_for(source, assets, sim)
     args.out_runs.mkdir(parents=True, exist_ok=True)
+    have = done(args)
     k = 0
     for seed in args.seeds:  # seed-major: a comparison cut short still covers every scene
         for name in names:
             for commit in ([args.base, args.new] if k % 2 == 0 else [args.new, args.base]):
-                if (commit, name, seed) in done(args):
+                if (commit, name, seed) in have:
                     print(f"[compare] {commit} {name} seed {seed}: in {args.out} already",
                           file=sys.stderr, flush=True)
                     continue

@@ -101,10 +101,6 @@ def dataset_for(source: str, assets: dict[str, Path], args) -> Path:
     return folder
 
 
-#: The suite command a child fits for (kept in fit.json as ``fit_command``).
-FIT_COMMAND = "HYBRIDNEUS_FIT_COMMAND"
-
-
 def launch(args, name: str, dataset: Path, spec: str, seed: int) -> dict | None:
     """Fit (and unless ``--fit-only`` score) one run in a child process; append its line.
 
@@ -124,7 +120,8 @@ def launch(args, name: str, dataset: Path, spec: str, seed: int) -> dict | None:
     print(f"[suite] {name} {spec} seed {seed}, {budget} on {args.device}", file=sys.stderr,
           flush=True)
     # the child records the command that fitted it, for a line scored later by another one
-    env = {**os.environ, FIT_COMMAND: os.environ.get(FIT_COMMAND) or common.stamp(None)["command"]}
+    env = {**os.environ,
+           common.FIT_COMMAND: os.environ.get(common.FIT_COMMAND) or common.command()}
     proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True, env=env)
     if proc.returncode != 0:
         print(f"[suite] {name} {spec} seed {seed}: the fit failed (exit {proc.returncode}); "

@@ -83,7 +83,7 @@ def fit_run(job, started: float) -> Path:
         "machine": common.machine(job.device),  # where it was fitted, not where it is scored
         # the fitted code, which a line scored later on another commit is credited to
         **dict(zip(("commit", "dirty"), common.git_state(), strict=True)),
-        "fit_command": os.environ.get("HYBRIDNEUS_FIT_COMMAND"),
+        "fit_command": os.environ.get(common.FIT_COMMAND),
     }
     with atomic_path(run_dir / "fit.json") as tmp:
         tmp.write_text(json.dumps(info, indent=1))

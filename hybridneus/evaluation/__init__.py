@@ -11,7 +11,6 @@ See docs/evaluation.md for the exact protocols.
 from hybridneus.evaluation.error_map import (
     error_image,
     save_error_image,
-    surface_distance,
     vertex_errors,
 )
 from hybridneus.evaluation.geometry import (
@@ -57,7 +56,6 @@ __all__ = [
     "sdf_mae",
     "signed_distance",
     "ssim",
-    "surface_distance",
     "unit_cube_transform",
     "unsigned_distance",
     "vertex_errors",

@@ -16,26 +16,14 @@ import numpy as np
 import trimesh
 
 from hybridneus.evaluation.geometry import MeshLike, as_mesh, normalize_pair
+from hybridneus.evaluation.inside import unsigned_distance
 from hybridneus.fileio import atomic_path
 
 
-def surface_distance(points: np.ndarray, target: MeshLike) -> np.ndarray:
-    """Distance (n,) from each of ``points`` (n, 3) to the surface of ``target``: exact point
-    to triangle distances, by Open3D's ray-casting scene."""
-    import open3d as o3d
-
-    target = as_mesh(target)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(target.vertices, dtype=np.float32)),
-                        o3d.core.Tensor(np.asarray(target.faces, dtype=np.uint32)))
-    query = o3d.core.Tensor(np.asarray(points, dtype=np.float32).reshape(-1, 3))
-    return scene.compute_distance(query).numpy().astype(np.float64)
-
-
 def vertex_errors(mesh: MeshLike, target: MeshLike) -> np.ndarray:
-    """Distance (V,) from each vertex of ``mesh`` to the surface of ``target``
-    (:func:`surface_distance`)."""
-    return surface_distance(np.asarray(as_mesh(mesh).vertices), target)
+    """Distance (V,) from each vertex of ``mesh`` to the surface of ``target`` (exact point
+    to triangle distances, :func:`hybridneus.evaluation.inside.unsigned_distance`)."""
+    return unsigned_distance(as_mesh(target), np.asarray(as_mesh(mesh).vertices))
 
 
 #: Light grey (no error; the shape stays readable) through yellow to red (``vmax`` and above).

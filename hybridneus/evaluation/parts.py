@@ -13,8 +13,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from hybridneus.evaluation.error_map import surface_distance
 from hybridneus.evaluation.geometry import MeshLike, as_mesh, normalize_pair, sample_surface
+from hybridneus.evaluation.inside import unsigned_distance
 
 
 @dataclass
@@ -61,7 +61,7 @@ def part_completeness(
     for i, part in enumerate(parts):
         n = max(200, int(round(n_samples * part.area / total)))
         points = sample_surface(part, n, seed + 1 + i)
-        distance = surface_distance(points, pred) if len(pred.faces) else np.full(n, np.inf)
+        distance = unsigned_distance(pred, points) if len(pred.faces) else np.full(n, np.inf)
         out.append(PartResult(i, float(part.area), tuple(float(e) for e in part.extents),
                               float(distance.mean()), float((distance < threshold).mean()), n))
     return out
