@@ -11,14 +11,17 @@ compared in one run are interleaved and share the machine's drift.
     python benchmarks/run_suite.py --seeds 0 1 2                      # assets, fast, 15 min
     python benchmarks/run_suite.py --scenes none --generated 6 --generated-seed 7
     python benchmarks/run_suite.py --scenes bunny --iters 2000 --presets fast eventneus fast-rgb
+    python benchmarks/run_suite.py --generated 6 --iters 2000 --presets fast fast+train.lr=0.02
     python benchmarks/run_suite.py --scenes bunny --set priors.hull.enabled=false
 
 Preset specs: ``fast``, ``quality``, ``eventneus`` (the paper's deep MLPs), ``<preset>-rgb``
-(the same model trained on the rendered RGB frames instead of the events: the upper bound);
-``--set`` overrides make a variant, named apart in the results. A machine without the meshing
-libraries (a GPU host) fits with ``--fit-only``; ``--score-runs RUN...`` scores the run
-folders later where they are. Lines go to ``benchmarks/results/suite.jsonl``
-(benchmarks/common.py); ``python benchmarks/report.py`` turns them into docs/benchmarks.md.
+(the same model trained on the rendered RGB frames instead of the events: the upper bound),
+``<preset>+KEY=VALUE[+KEY=VALUE...]`` (a variant, interleaved with the others of the run);
+``--set`` overrides apply to every fit. Both kinds of variant are named apart in the
+results. A machine without the meshing libraries (a GPU host) fits with ``--fit-only``;
+``--score-runs RUN...`` scores the run folders later where they are. Lines go to
+``benchmarks/results/suite.jsonl`` (benchmarks/common.py); ``python benchmarks/report.py``
+turns them into docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -182,7 +185,9 @@ def main() -> None:
     ap.add_argument("--generated", type=int, default=0, metavar="N",
                     help="add N generated objects, the kinds in turn")
     ap.add_argument("--generated-seed", type=int, default=0, help="draws the generated set")
-    ap.add_argument("--presets", nargs="+", default=["fast"])
+    ap.add_argument("--presets", nargs="+", default=["fast"],
+                    help="preset specs: a preset, PRESET-rgb (frames instead of events), "
+                    "PRESET+KEY=VALUE[+KEY=VALUE...] (a variant)")
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
     budget = ap.add_mutually_exclusive_group()
     budget.add_argument("--minutes", type=float, help="fit budget (default 15)")

@@ -21,10 +21,13 @@ import numpy as np
 
 
 def preset_spec(spec: str) -> tuple[str, list[str]]:
-    """``fast`` -> ("fast", []); ``fast-rgb`` -> ("fast", ["train.supervision=rgb"])."""
-    if spec.endswith("-rgb"):
-        return spec.removesuffix("-rgb"), ["train.supervision=rgb"]
-    return spec, []
+    """A preset and its overrides: ``fast`` -> ("fast", []); ``fast-rgb`` -> ("fast",
+    ["train.supervision=rgb"]); ``fast+k=v+k2=v2`` -> ("fast", ["k=v", "k2=v2"]), so that
+    variants compared in one suite run are interleaved with their preset."""
+    name, *overrides = spec.split("+")
+    if name.endswith("-rgb"):
+        return name.removesuffix("-rgb"), ["train.supervision=rgb", *overrides]
+    return name, overrides
 
 
 def fit_run(job, started: float) -> Path:

@@ -86,6 +86,16 @@ def test_the_generated_set_is_drawn_from_its_seed():
     assert suite.scene_name("bunny") == "bunny"
 
 
+def test_preset_specs_name_a_preset_and_its_overrides():
+    _suite_module()
+    import suite_jobs
+
+    assert suite_jobs.preset_spec("fast") == ("fast", [])
+    assert suite_jobs.preset_spec("quality-rgb") == ("quality", ["train.supervision=rgb"])
+    assert suite_jobs.preset_spec("fast+train.view_balance=1+priors.hull.enabled=false") == (
+        "fast", ["train.view_balance=1", "priors.hull.enabled=false"])
+
+
 def test_a_dirty_tree_is_refused_unless_told(monkeypatch):
     import argparse
 

@@ -149,3 +149,39 @@ def test_the_untrained_colour_starts_at_the_sigmoid_midpoint():
     dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
     with torch.no_grad():
         assert (grey.color(pts, dirs) - 0.5).abs().max() < 0.05
+
+
+def _colour_grads(f: HybridField) -> tuple[float, float]:
+    """|d colour / d SDF grid tables| and |d colour / d colour grid tables| with the normal
+    held fixed, so that only the feature path is measured."""
+    torch.nn.init.normal_(f.sdf_net.layers[0].weight, std=0.1)
+    pts = torch.rand(256, 3) * 2 - 1
+    dirs = torch.nn.functional.normalize(torch.randn(256, 3), dim=-1)
+    _, feats = f.sdf_and_features(pts)
+    f.radiance(pts, dirs, dirs, feats).sum().backward()
+
+    def total(grid) -> float:
+        return sum(float(t.grad.abs().sum()) for t in grid.tables if t.grad is not None)
+
+    return total(f.encoding), (total(f.color_encoding) if f.color_encoding is not None
+                               else 0.0)
+
+
+def test_colour_grid_keeps_texture_out_of_the_sdf_features():
+    shared = small_field()
+    assert shared.color_encoding is None
+    to_sdf, _ = _colour_grads(shared)
+    assert to_sdf > 0  # the shared features carry colour gradients into the SDF grid
+    own = small_field(color_grid_levels=3)
+    to_sdf, to_colour = _colour_grads(own)
+    assert to_sdf == 0 and to_colour > 0
+    with torch.no_grad():
+        rgb = own.color(torch.zeros(4, 3), torch.tensor([[0.0, 0.0, 1.0]] * 4))
+    assert rgb.shape == (4, 3)
+
+
+def test_colour_grid_needs_a_grid_encoding():
+    with pytest.raises(ConfigError, match="color_grid_levels"):
+        HybridField(GridConfig(kind="frequency"), FieldConfig(color_grid_levels=4))
+    with pytest.raises(ConfigError, match="color_grid_levels"):
+        small_field(color_grid_levels=-1)

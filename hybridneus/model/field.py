@@ -7,7 +7,9 @@ or a cube around the crop box), or by annealed frequencies for the ``eventneus``
 - the SDF head maps ``[x, encoding]`` through Softplus(beta=100) layers to
   ``1 + feature_dim`` values (SDF first), geometrically initialised to a sphere;
 - the colour head maps ``[SH(view dir), normal = grad SDF, features (, PE(x))]`` to RGB
-  through a sigmoid;
+  through a sigmoid; with ``field.color_grid_levels > 0`` it reads its own hash grid's
+  features and only a detached copy of the SDF head's, so that texture is learned by the
+  colour grid and cannot pull the surface into relief through the shared features;
 - the NeuS sharpness is ``inv_s = exp(10 v)`` with a learned scalar ``v``;
 - the background is the dataset's constant colour or a learned one;
 - the crop cylinder of the scene preset (``x^2 + z^2 <= r^2``, ``y_min <= y <= y_max``) is
@@ -150,7 +152,7 @@ class HybridField(nn.Module):
         crop: tuple[float, float, float] = (1.0, -1.0, 1.0),
     ) -> None:
         super().__init__()
-        from hybridneus.grids import FrequencyEncoding, SphericalHarmonics
+        from hybridneus.grids import FrequencyEncoding, HashGrid, SphericalHarmonics
 
         self.grid_config = grid
         self.field_config = field
@@ -174,6 +176,22 @@ class HybridField(nn.Module):
         self.sh = SphericalHarmonics(field.sh_degree)
         self.color_pe: nn.Module | None = None
         color_in = self.sh.out_dim + 3 + field.feature_dim
+        self.color_encoding: nn.Module | None = None
+        if field.color_grid_levels < 0:
+            raise ConfigError(
+                f"field.color_grid_levels: must be >= 0, got {field.color_grid_levels}")
+        if field.color_grid_levels > 0:
+            if grid.kind == "frequency":
+                raise ConfigError("field.color_grid_levels: needs a grid encoding "
+                                  "(grid.kind hash or dense), not frequency")
+            self.color_encoding = HashGrid(
+                n_levels=field.color_grid_levels,
+                n_features_per_level=grid.n_features,
+                log2_hashmap_size=grid.log2_table_size,
+                base_resolution=grid.base_resolution,
+                finest_resolution=grid.max_resolution,
+            )
+            color_in += int(self.color_encoding.out_dim)
         if field.color_position_frequencies > 0:
             self.color_pe = FrequencyEncoding(field.color_position_frequencies, n_anneal=None)
             color_in += int(self.color_pe.out_dim)
@@ -239,17 +257,18 @@ class HybridField(nn.Module):
 
     # ------------------------------------------------------------------ core (torch)
 
+    def _grid_input(self, points: torch.Tensor) -> torch.Tensor:
+        """``points`` mapped from :attr:`grid_box` to the grids' unit cube."""
+        lo, hi = self.grid_box[:3], self.grid_box[3:]
+        return (points - lo) / (hi - lo)
+
     def sdf_and_features(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Raw SDF (n_points,) and geometric features (n_points, feature_dim).
 
         Note:
             Differentiable to second order in ``points`` (for the Eikonal term).
         """
-        if self._unit_cube:
-            lo, hi = self.grid_box[:3], self.grid_box[3:]
-            enc_in = (points - lo) / (hi - lo)
-        else:
-            enc_in = points
+        enc_in = self._grid_input(points) if self._unit_cube else points
         h = torch.cat([points, self.encoding(enc_in).to(points.dtype)], dim=-1)
         out = self.sdf_net(h)
         return out[:, 0], out[:, 1:]
@@ -284,8 +303,15 @@ class HybridField(nn.Module):
         normals: torch.Tensor,  # (n, 3)
         features: torch.Tensor,  # (n, F)
     ) -> torch.Tensor:
-        """Colour head: RGB (n, 3) in [0, 1]. Differentiable in all inputs."""
+        """Colour head: RGB (n, 3) in [0, 1].
+
+        Differentiable in all inputs, except ``features`` when the field has its own colour
+        grid (``field.color_grid_levels``).
+        """
         parts = [self.sh(dirs), normals, features]
+        if self.color_encoding is not None:
+            parts[2] = features.detach()
+            parts.append(self.color_encoding(self._grid_input(points)).to(points.dtype))
         if self.color_pe is not None:
             parts.append(self.color_pe(points))
         return torch.sigmoid(self.color_net(torch.cat(parts, dim=-1)))
