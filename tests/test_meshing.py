@@ -15,7 +15,7 @@ from hybridneus.meshing import (
     extract_sdf_mesh,
 )
 from hybridneus.model.analytic import BoxField, SphereField, TorusField, UnionField
-from hybridneus.model.field import crop_sdf
+from hybridneus.model.crop import crop_sdf
 from hybridneus.model.protocol import Field
 
 RAW = PostprocessOptions(enabled=False)

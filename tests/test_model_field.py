@@ -8,7 +8,8 @@ import torch
 
 from hybridneus.config import FieldConfig, GridConfig, preset_config
 from hybridneus.errors import ConfigError
-from hybridneus.model.field import VOLUME_BOX, HybridField, crop_sdf, grid_box
+from hybridneus.model.crop import VOLUME_BOX, crop_sdf, grid_box
+from hybridneus.model.field import HybridField
 from hybridneus.model.protocol import Field
 
 

@@ -15,7 +15,7 @@ import torch
 from hybridneus.config import LossConfig
 from hybridneus.data.frames import FrameBatch
 from hybridneus.data.windows import RayBatch
-from hybridneus.model.field import crop_sdf
+from hybridneus.model.crop import crop_sdf
 from hybridneus.training import losses as L
 from hybridneus.training.priors import Prior, RandomPoints, StepContext
 

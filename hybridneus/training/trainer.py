@@ -22,7 +22,8 @@ from hybridneus.config import Config
 from hybridneus.data.frames import FrameBatch
 from hybridneus.data.windows import RayBatch
 from hybridneus.errors import RunError
-from hybridneus.model.field import HybridField, crop_aabb
+from hybridneus.model.crop import crop_aabb
+from hybridneus.model.field import HybridField
 from hybridneus.rendering.occupancy import OccupancyGrid
 from hybridneus.rendering.renderer import render_rays
 from hybridneus.rendering.sampling import NeuSSampler
