@@ -13,6 +13,7 @@ table of two commits' fits paired by scene, seed, preset and budget on the same 
 from __future__ import annotations
 
 import argparse
+import re
 import statistics
 from collections import defaultdict
 from pathlib import Path
@@ -47,11 +48,32 @@ def _kind(scene: str) -> str:
     return scene.split("-")[1] if scene.startswith("gen-") else scene
 
 
+def base_preset(preset: str) -> str:
+    """The preset a variant's name starts with: ``fast priors.hull.enabled=false`` (a
+    ``--set`` override) and ``fast+train.view_balance=1`` (a preset spec) -> ``fast``."""
+    return re.split(r"[ +]", preset, maxsplit=1)[0]
+
+
+def _run_key(r: dict) -> tuple:
+    return (r["commit"], _budget(r), _cpu(r))
+
+
+def _with_base(lines: list[dict]) -> set[tuple]:
+    """(commit, budget, machine, variant) of the variants whose preset has fits in the same
+    (commit, budget, machine)."""
+    presets = {(*_run_key(r), r["preset"]) for r in lines}
+    return {(*k, p) for *k, p in presets
+            if base_preset(p) != p and (*k, base_preset(p)) in presets}
+
+
 def suite_section(lines: list[dict]) -> list[str]:
-    """Accuracy: per (commit, preset, budget, machine) the mean CD per scene over seeds."""
+    """Accuracy: per (commit, preset, budget, machine) the mean CD per scene over seeds;
+    variants with their preset beside them are in :func:`variant_section` instead."""
     groups: dict[tuple, list[dict]] = defaultdict(list)
+    paired = _with_base(lines)
     for r in lines:
-        groups[(r["commit"], r["preset"], _budget(r), _cpu(r))].append(r)
+        if (*_run_key(r), r["preset"]) not in paired:
+            groups[(r["commit"], r["preset"], _budget(r), _cpu(r))].append(r)
     out = ["## Accuracy", "",
            "Chamfer distance (the paper's protocol, lower is better) of `hybridneus mesh`'s "
            "mesh against the simulator's ground truth; per scene the mean over seeds and "
@@ -129,6 +151,81 @@ def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
         out.append(f"| **mean, {name}** | | | | **{mx:.4f}** | | **{my:.4f}** | | "
                    f"{100 * (my / mx - 1):+.1f}% | |")
     return [*out, ""]
+
+
+def _cd(r: dict) -> float | None:
+    return r.get("chamfer")
+
+
+def variant_section(lines: list[dict]) -> list[str]:
+    """Variants (a preset with overrides) against their preset's fits of the same commit,
+    budget and machine, scene by scene on the seeds both have."""
+    paired = _with_base(lines)
+    if not paired:
+        return []
+    out = ["## Variants against their preset", "",
+           "A variant is a preset with config overrides, fitted in the same suite run as the "
+           "preset itself (same commit, budget and machine; the suite interleaves them). Per "
+           "scene: the preset's mean CD over its seeds and their range, and each variant's "
+           "change on the seeds both have; `!` marks a change beyond the preset's seed range "
+           "(`+`: worse, `-`: better), `empty` a fit that left no surface. The keep rule for a "
+           "prior: on by default only if switching it off makes the mean worse and no scene "
+           "better beyond the range.", ""]
+    runs = sorted({(k[:3], base_preset(k[3])) for k in paired}, key=lambda kv: kv[0])
+    for (commit, budget, cpu), base in runs:
+        variants = sorted(p for *k, p in paired if tuple(k) == (commit, budget, cpu)
+                          and base_preset(p) == base)
+        rows = [r for r in lines if _run_key(r) == (commit, budget, cpu)]
+        fits: dict[tuple[str, str], dict[int, dict]] = defaultdict(dict)
+        for r in rows:
+            fits[(r["preset"], r["scene"])][r["seed"]] = r
+        names = [v[len(base):].strip(" +") for v in variants]
+        out += [f"### `{base}` and its variants, {budget}, commit {commit}, {cpu}", "",
+                f"Command: `{rows[-1].get('fit_command') or rows[-1]['command']}`", "",
+                f"| scene | seeds | CD `{base}` | range | "
+                + " | ".join(f"`{n}`" for n in names) + " |",
+                "|---|---|---|---|" + "---|" * len(names)]
+        scenes = sorted({s for p, s in fits if p == base}, key=lambda s: (s.startswith("gen-"),
+                                                                          s))
+        changes: dict[str, list[tuple[float, float]]] = defaultdict(list)
+        empties: dict[str, int] = defaultdict(int)
+        for scene in scenes:
+            own = {seed: _cd(r) for seed, r in fits[(base, scene)].items()}
+            done = [v for v in own.values() if v is not None]
+            spread = max(done) - min(done) if len(done) > 1 else None
+            cells = []
+            for v in variants:
+                theirs = {seed: _cd(r) for seed, r in fits.get((v, scene), {}).items()}
+                seeds = sorted(set(own) & set(theirs))
+                if not seeds:
+                    cells.append("-")
+                    continue
+                if any(own[s] is None or theirs[s] is None for s in seeds):
+                    lost = sum(theirs[s] is None for s in seeds)
+                    empties[v] += lost
+                    cells.append("empty" if lost else "-")
+                    continue
+                a = statistics.mean(own[s] for s in seeds)
+                b = statistics.mean(theirs[s] for s in seeds)
+                changes[v].append((a, b))
+                flag = ("" if spread is None or abs(b - a) <= spread
+                        else (" ! +" if b > a else " ! -"))
+                cells.append(f"{b:.4f} ({100 * (b / a - 1):+.0f}%{flag})")
+            out.append(f"| {scene} | {len(own)} | {_f(statistics.mean(done) if done else None)}"
+                       f" | {_spread(done)} | " + " | ".join(cells) + " |")
+        means = []
+        for v in variants:
+            pairs = changes.get(v, [])
+            if not pairs:
+                means.append("-")
+                continue
+            a = statistics.mean(x for x, _ in pairs)
+            b = statistics.mean(y for _, y in pairs)
+            lost = f"; {_count(empties[v], 'empty fit')} besides" if empties[v] else ""
+            means.append(f"**{b:.4f}** against {a:.4f} ({100 * (b / a - 1):+.1f}%, "
+                         f"{_count(len(pairs), 'scene')}{lost})")
+        out += ["| **mean, same scenes and seeds** | | | | " + " | ".join(means) + " |", ""]
+    return out
 
 
 README = common.REPO / "README.md"
@@ -255,6 +352,7 @@ def build(compare: list[tuple[str, str]]) -> str:
            "carry their commit, machine, threads, date and command.", ""]
     for base, new in compare:
         out += compare_section(suite, base, new)
+    out += variant_section(suite)
     out += suite_section(suite)
     out += speed_section(results)
     return "\n".join(out).rstrip() + "\n"

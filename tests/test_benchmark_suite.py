@@ -206,6 +206,37 @@ def test_a_comparison_started_again_skips_the_fits_it_has(tmp_path):
     assert compare_commits.done(args) == {("abc1234", "bunny", 1)}
 
 
+def test_variants_are_set_beside_their_preset_on_the_same_seeds():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    base = {"commit": "abc1234", "iters": 2000, "threads": 1, "machine": {"cpu": "X"},
+            "steps": 2000, "date": "2026-11-26T10:00:00+00:00", "command": "run_suite.py"}
+
+    def line(preset, scene, seed, cd):
+        return {**base, "preset": preset, "scene": scene, "seed": seed, "chamfer": cd}
+
+    off, spec = "fast priors.hull.enabled=false", "fast+train.view_balance=1"
+    lines = [line("fast", "bunny", 0, 0.010), line("fast", "bunny", 1, 0.012),
+             line("fast", "gen-cage-1", 0, 0.05), line("fast", "gen-cage-1", 1, 0.06),
+             line(off, "bunny", 0, 0.02), line(off, "gen-cage-1", 0, None),
+             line(spec, "bunny", 0, 0.0105),
+             {**line("fast priors.curvature.enabled=false", "toyTrain", 0, 0.01),
+              "commit": "def5678"}]
+    text = "\n".join(report.variant_section(lines))
+    header = ("| scene | seeds | CD `fast` | range | `priors.hull.enabled=false` "
+              "| `train.view_balance=1` |")
+    assert header in text
+    # seed 0 against seed 0; worse beyond the preset's range of 0.002
+    assert "| bunny | 2 | 0.0110 | 0.0100-0.0120 | 0.0200 (+100% ! +) | 0.0105 (+5%) |" in text
+    assert "| gen-cage-1 | 2 | 0.0550 | 0.0500-0.0600 | empty | - |" in text
+    assert "1 scene; 1 empty fit besides" in text
+    # a variant without its preset in the same run stays in the accuracy section
+    assert "def5678" not in text
+    assert "def5678" in "\n".join(report.suite_section(lines))
+    assert "priors.hull" not in "\n".join(report.suite_section(lines))
+
+
 def test_speed_tables_give_each_field_a_column():
     sys.path.insert(0, str(SUITE.parent))
     import report
