@@ -20,6 +20,8 @@ from pathlib import Path
 
 import common
 
+from hybridneus.simulate.generated import SCARCE_KINDS
+
 DOC = common.REPO / "docs" / "benchmarks.md"
 
 
@@ -46,6 +48,15 @@ def _spread(values: list[float]) -> str:
 
 def _kind(scene: str) -> str:
     return scene.split("-")[1] if scene.startswith("gen-") else scene
+
+
+def _groups(scene: str) -> list[str]:
+    """The mean rows a scene counts in."""
+    if not scene.startswith("gen-"):
+        return ["assets"]
+    if _kind(scene) in SCARCE_KINDS:
+        return ["generated", f"generated, {'/'.join(SCARCE_KINDS)}"]
+    return ["generated"]
 
 
 def base_preset(preset: str) -> str:
@@ -100,7 +111,8 @@ def suite_section(lines: list[dict]) -> list[str]:
             failed = len(rs) - len(cds)
             mean = statistics.mean(cds) if cds else None
             if mean is not None:
-                means["generated" if scene.startswith("gen-") else "assets"].append(mean)
+                for group in _groups(scene):
+                    means[group].append(mean)
             fs = [r["fscore"] for r in rs if r.get("fscore") is not None]
             note = f" ({failed} without a surface)" if failed else ""
             firsts = [r["first_step_s"] for r in rs if r.get("first_step_s") is not None]
@@ -139,7 +151,8 @@ def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
         if not xs:
             continue
         mx, my = statistics.mean(xs), statistics.mean(ys)
-        totals["generated" if scene.startswith("gen-") else "assets"].append((mx, my))
+        for group in _groups(scene):
+            totals[group].append((mx, my))
         # worse by more than either commit's seed spread (a single seed has none to go by)
         spread = max(max(xs) - min(xs), max(ys) - min(ys))
         beyond = "-" if len(xs) < 2 else ("yes" if my - mx > spread else "no")

@@ -237,6 +237,23 @@ def test_variants_are_set_beside_their_preset_on_the_same_seeds():
     assert "priors.hull" not in "\n".join(report.suite_section(lines))
 
 
+def test_the_kinds_with_few_events_get_their_own_mean():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    base = {"preset": "fast", "minutes": 15.0, "threads": 2, "machine": {"cpu": "X"},
+            "steps": 100, "seed": 0, "fit_wall_s": 900.0, "date": "2026-11-26T10:00:00+00:00",
+            "command": "run_suite.py"}
+    lines = [{**base, "commit": c, "scene": s, "chamfer": cd}
+             for c, s, cd in (("aaa", "gen-box-1", 0.02), ("bbb", "gen-box-1", 0.01),
+                              ("aaa", "gen-blob-2", 0.01), ("bbb", "gen-blob-2", 0.01))]
+    text = "\n".join(report.compare_section(lines, "aaa", "bbb"))
+    assert "| **mean, generated** | | | | **0.0150** | | **0.0100** |" in text
+    assert "| **mean, generated, box/slab/cage/rods** | | | | **0.0200** | | **0.0100** |" in text
+    accuracy = "\n".join(report.suite_section(lines))
+    assert "| **mean, generated, box/slab/cage/rods** | | **0.0100** |" in accuracy
+
+
 def test_speed_tables_give_each_field_a_column():
     sys.path.insert(0, str(SUITE.parent))
     import report

@@ -31,6 +31,21 @@ def test_import_hybridneus_does_not_import_torch_or_open3d() -> None:
     assert out.stdout.split() == ["False", "False"]
 
 
+def test_the_readme_python_example_names_what_the_package_has() -> None:
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    block = readme.split("## From Python", 1)[1].split("```python", 1)[1].split("```", 1)[0]
+    names = set(re.findall(r"\bhn\.(\w+)", block))
+    assert {"fit", "extract_mesh", "load_field"} <= names
+    hn = importlib.import_module("hybridneus")
+    assert not [n for n in names if not hasattr(hn, n)]
+    for module, imported in re.findall(r"from ([\w.]+) import ([\w, ]+)", block):
+        mod = importlib.import_module(module)
+        assert all(hasattr(mod, n.strip()) for n in imported.split(","))
+
+
 def test_grids_and_cli_install_under_hybridneus() -> None:
     import hybridneus.cli.app
     import hybridneus.grids

@@ -26,6 +26,9 @@ from hybridneus.simulate.render import Shading
 from hybridneus.simulate.scene_mesh import SceneMesh, concatenate_parts, part_from_trimesh
 
 KINDS = ("box", "slab", "cage", "bowl", "blob", "rods")
+#: The kinds made of parts that fire few events (flat faces of one colour, faint plates, thin
+#: wires and rods): the ones the benchmarks summarise apart.
+SCARCE_KINDS = ("box", "slab", "cage", "rods")
 PREFIX = "generated:"
 #: The renderer's default background (sRGB); "faint" colours are drawn near it.
 BACKGROUND = 159 / 255
