@@ -225,6 +225,7 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
         trainer.total_steps = record.steps = max(trainer.step + 1, cfg.train.iters)
         record.steps_from = "train.iters (changed on resume)"
     trainer.deadline = None
+    record.stopped_at = None  # the resumed run goes on to the schedule's end
     logger = RunLogger(run_dir, run_dir.parent, resume_step=trainer.step)
     logger.start(trainer)
     return trainer, logger

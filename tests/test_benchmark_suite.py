@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 from conftest import TINY_FIT, TINY_SIZE
 
 SUITE = Path(__file__).resolve().parents[1] / "benchmarks" / "run_suite.py"
@@ -289,3 +290,46 @@ def test_readme_block_rows_summarise_assets_and_generated_objects():
     _, _, row = report.readme_block(lines, "abc1234")
     assert row == ("| `fast` | 15 min | X, 2 threads | 0.0200 (1 asset, 2 seeds) | "
                    "0.0500 (1 object, 1 seed) | 90-100 |")
+
+
+def test_pictures_come_from_suite_lines(tmp_path):
+    """benchmarks/pictures.py: one block per preset's line, in order, with its Chamfer."""
+    import pytest
+    import trimesh
+
+    sys.path.insert(0, str(SUITE.parent))
+    spec = importlib.util.spec_from_file_location("pictures", SUITE.parent / "pictures.py")
+    pictures = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pictures)
+    data = tmp_path / "data"
+    data.mkdir()
+    trimesh.creation.box(extents=(0.5, 0.1, 0.4)).export(data / "gt_mesh.ply")
+    lines = []
+    for i, (preset, extents) in enumerate((("fast", (0.5, 0.16, 0.4)),
+                                           ("fast+x=1", (0.5, 0.1, 0.4)))):
+        run = tmp_path / f"run{i}"
+        run.mkdir()
+        trimesh.creation.box(extents=extents).export(run / "mesh.ply")
+        lines.append({"scene": "slab", "preset": preset, "seed": 0, "commit": "abc1234",
+                      "dirty": False, "date": f"2026-01-0{i + 1}", "iters": 100, "minutes": 0,
+                      "chamfer": 0.02 - 0.01 * i, "run": str(run), "dataset": str(data)})
+    stale = dict(lines[0], commit="0000000", chamfer=0.5)
+    results = tmp_path / "suite.jsonl"
+    results.write_text("".join(json.dumps(r) + "\n" for r in [stale, *lines]))
+    picked = pictures.pick_lines(pictures.common.read_lines(results), "slab",
+                                 ["fast+x=1", "fast"], "abc1234", 0)
+    assert [r["preset"] for r in picked] == ["fast+x=1", "fast"]
+    out = tmp_path / "pic.png"
+    assert pictures.main(["slab", "--presets", "fast", "fast+x=1", "--commit", "abc1234",
+                          "--results", str(results), "--size", "64", "--out", str(out)]) == 0
+    from PIL import Image
+
+    image = np.asarray(Image.open(out))
+    single = pictures.picture(picked[:1], 0.02, 64)
+    assert image.shape[0] == 2 * single.shape[0] and image.shape[1] == single.shape[1]
+    # the thick slab's block shows error colours; the exact one's mesh row stays grey
+    thick, exact = image[:single.shape[0]], image[single.shape[0]:]
+    red = lambda im: int(((im[..., 0] > 150) & (im[..., 2] < 80)).sum())  # noqa: E731
+    assert red(thick) > red(exact)
+    with pytest.raises(SystemExit, match="no clean line of slab seed 0 with preset 'quality'"):
+        pictures.pick_lines(lines, "slab", ["quality"], None, 0)

@@ -56,13 +56,16 @@ def test_a_budget_is_turned_into_steps_once_and_repeats_with_iters(scene, tmp_pa
         assert torch.equal(a[k], b[k]), k
 
 
-def test_a_run_stops_at_its_deadline(scene, caplog):
-    trainer, _ = prepare(scene, tiny("train.iters=100000"), device="cpu")
+def test_a_run_stops_at_its_deadline_and_records_where(scene, caplog, tmp_path):
+    trainer, logger = prepare(scene, tiny("train.iters=100000"), out=tmp_path, device="cpu")
     trainer.deadline = time.perf_counter() + 0.5
     with caplog.at_level("WARNING", logger="hybridneus"):
-        trainer.fit(progress=False)
+        trainer.fit(run=logger, progress=False)
     assert trainer.stopped_early and 0 < trainer.step < 100000
     assert "the time budget ran out" in caplog.text
+    record = SceneRecord.load(logger.run_dir / "scene.yaml")
+    assert record.steps == 100000 and record.stopped_at == trainer.step
+    assert any("stopped at step" in line for line in record.lines())
 
 
 def test_a_budget_too_short_to_train_is_refused(scene, tmp_path):

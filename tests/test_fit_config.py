@@ -88,6 +88,10 @@ def test_bad_overrides_raise_one_line_errors(item, message):
         ("priors.hull.weight=-1", "priors.hull.weight: expected a weight >= 0"),
         ("priors.curvature.end=2", "priors.curvature.end: expected a fraction"),
         ("priors.collapse_guard.lr_factor=0", "priors.collapse_guard.lr_factor: expected in"),
+        ("grid.kind=octree", "grid.kind: expected hash, dense or frequency"),
+        ("grid.domain=sphere", "grid.domain: expected crop or volume"),
+        ("field.color_activation=tanh", "field.color_activation: expected relu or softplus"),
+        ("field.color_grid_levels=-1", "field.color_grid_levels: expected >= 0"),
     ],
 )
 def test_values_out_of_range_are_config_errors(item, message):
@@ -97,6 +101,13 @@ def test_values_out_of_range_are_config_errors(item, message):
     assert message in str(info.value) and "\n" not in str(info.value)
     for name in ("fast", "quality", "eventneus"):
         validate(preset_config(name))
+
+
+def test_a_colour_grid_needs_a_grid_encoding():
+    cfg = apply_overrides(preset_config("eventneus"), ["field.color_grid_levels=8"])
+    with pytest.raises(ConfigError, match="field.color_grid_levels: needs a grid encoding"):
+        validate(cfg)
+    validate(apply_overrides(preset_config("fast"), ["field.color_grid_levels=8"]))
 
 
 def test_keys_of_hybridneus_0_1_name_their_successor(tmp_path):

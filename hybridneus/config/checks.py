@@ -34,6 +34,12 @@ def _fraction(v: float) -> bool:
 
 #: (key, test, what the value must be): checked by :func:`validate`.
 _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
+    ("grid.kind", lambda v: v in ("hash", "dense", "frequency"), "hash, dense or frequency"),
+    ("grid.domain", lambda v: v in ("crop", "volume"), "crop or volume"),
+    ("grid.domain_margin", lambda v: v >= 0, ">= 0"),
+    ("field.color_activation", lambda v: v in ("relu", "softplus"), "relu or softplus"),
+    ("field.color_grid_levels", lambda v: v >= 0, ">= 0 (0: the SDF's features)"),
+    ("render.empty_share", _fraction, "a share in [0, 1]"),
     ("train.iters", lambda v: v >= 1, ">= 1"),
     ("train.minutes", lambda v: v >= 0, ">= 0 (0: no budget)"),
     ("train.n_rays", lambda v: v >= 0, ">= 0 (0: the device's default)"),
@@ -86,6 +92,9 @@ def validate(cfg: Config) -> Config:
         value = _get(cfg, key)
         if not ok(value):
             raise ConfigError(f"{key}: expected {what}, got {value!r}")
+    if cfg.field.color_grid_levels > 0 and cfg.grid.kind == "frequency":
+        raise ConfigError("field.color_grid_levels: needs a grid encoding (grid.kind hash or "
+                          "dense), not frequency")
     weights = [f"loss.{f.name}" for f in dataclasses.fields(cfg.loss)
                if f.name.startswith("lambda_")]
     weights += [f"priors.{f.name}.weight" for f in dataclasses.fields(cfg.priors)

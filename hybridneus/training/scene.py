@@ -44,6 +44,8 @@ class SceneRecord:
         steps_from: how ``steps`` was chosen (``train.iters``, or the budget and the speed).
         n_rays: pixels per step.
         device: the device trained on.
+        stopped_at: the step a budgeted fit stopped at because the machine ran slower than
+            its probe measured (the schedule still counts ``steps``); ``None``: it ran them all.
         version: the hybridneus version that wrote the record.
     """
 
@@ -58,6 +60,7 @@ class SceneRecord:
     n_rays: int = 256
     device: str = "cpu"
     version: str = ""
+    stopped_at: int | None = None
 
     def preset_overrides(self) -> dict[str, Any]:
         """The preset values to give the dataset reader so that it uses this record's."""
@@ -77,6 +80,8 @@ class SceneRecord:
         out.append(crop + _how(self.estimated.get("crop_r")))
         out.append(f"  {self.steps} steps ({self.steps_from}), {self.n_rays} pixels per step "
                    f"on {self.device}")
+        if self.stopped_at is not None:
+            out.append(f"  stopped at step {self.stopped_at}: the time budget ran out")
         return out
 
     def save(self, path: str | os.PathLike) -> None:

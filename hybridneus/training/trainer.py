@@ -100,7 +100,7 @@ class Trainer:
             self.aabb, n_coarse=r.n_coarse, n_importance=r.n_importance,
             up_rounds=r.up_rounds, up_base_inv_s=r.up_base_inv_s,
             occupancy=self.occupancy if r.occupancy else None, n_march=r.occupancy_march,
-            near_min=r.near_min, chunk=r.chunk,
+            near_min=r.near_min, chunk=r.chunk, empty_share=r.empty_share,
         )
         self.windows = EventWindowSampler(self.split, self.preset, seed=cfg.train.seed,
                                           window=cfg.train.window, device=self.device,
