@@ -108,7 +108,7 @@ def child_load(root: str) -> dict:
 
 def child_window(root: str, repeats: int) -> dict:
     from hybridneus.data import EventCounter, load_dataset
-    from hybridneus.data.windows import _counter, event_frame
+    from hybridneus.data.windows import event_counter, event_frame
 
     ds = load_dataset(root)
     sp = ds.splits["train"]
@@ -145,7 +145,7 @@ def child_window(root: str, repeats: int) -> dict:
             "plain_bincount_ms": 1e3 * _median_time(plain, repeats) / len(ends),
             "event_frame_ms": 1e3 * _median_time(indexed, repeats) / len(ends),
         }
-    assert _counter(sp) is counter
+    assert event_counter(sp) is counter
     return out
 
 
