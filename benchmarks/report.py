@@ -29,7 +29,9 @@ def _cpu(line: dict) -> str:
     m = line.get("machine", {})
     if m.get("gpu"):
         return m["gpu"]
-    return f"{m.get('cpu', '?')}, {line.get('threads')} threads"
+    threads = line.get("threads")
+    # 0 or None: the library's own default, all cores
+    return f"{m.get('cpu', '?')}, {threads or m.get('cores', 'all')} threads"
 
 
 def _budget(line: dict) -> str:
