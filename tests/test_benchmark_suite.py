@@ -290,6 +290,10 @@ def test_readme_block_rows_summarise_assets_and_generated_objects():
     _, _, row = report.readme_block(lines, "abc1234")
     assert row == ("| `fast` | 15 min | X, 2 threads | 0.0200 (1 asset, 2 seeds) | "
                    "0.0500 (1 object, 1 seed) | 90-100 |")
+    # a scene fitted with more seeds does not weigh more: (0.02 + 0.04) / 2, not 0.08 / 3
+    lines.append({**base, "scene": "xylophone", "seed": 0, "chamfer": 0.04})
+    _, _, row = report.readme_block(lines, "abc1234")
+    assert "| 0.0300 (2 assets, 1-2 seeds) |" in row
 
 
 def test_pictures_come_from_suite_lines(tmp_path):
