@@ -79,6 +79,18 @@ def _with_base(lines: list[dict]) -> set[tuple]:
             if base_preset(p) != p and (*k, base_preset(p)) in presets}
 
 
+def _how(r: dict) -> str:
+    """How a suite line was made, in a form shared by every line of the same run.
+
+    compare_commits.py stamps each fit with the run_suite call it made for that one scene
+    and seed; the comparison's own command is what reruns them all."""
+    command = r["command"].split(" (fits with the commit's ")[0]
+    fitted = r.get("fit_command")
+    if fitted and fitted != r["command"]:
+        return f"`{fitted}`, scored by `{command}`"
+    return f"`{command}`"
+
+
 def suite_section(lines: list[dict]) -> list[str]:
     """Accuracy: per (commit, preset, budget, machine) the mean CD per scene over seeds;
     variants with their preset beside them are in :func:`variant_section` instead."""
@@ -98,9 +110,8 @@ def suite_section(lines: list[dict]) -> list[str]:
         for r in rows:
             by_scene[r["scene"]].append(r)
         dates = sorted(r["date"][:10] for r in rows)
-        fitted = rows[-1].get("fit_command")
-        how = (f"fitted by `{fitted}`, scored by `{rows[-1]['command']}`"
-               if fitted and fitted != rows[-1]["command"] else f"command: `{rows[-1]['command']}`")
+        hows = list(dict.fromkeys(_how(r) for r in rows))  # each command once, in order
+        how = ("command: " if len(hows) == 1 else "commands: ") + "; ".join(hows)
         out += [f"### `{preset}`, {budget}, commit {commit}, {cpu}", "",
                 f"{len(rows)} fits, {dates[0]} to {dates[-1]}; {how}", "",
                 "| scene | seeds | CD mean | CD range | F@1% | steps | longest wall s "

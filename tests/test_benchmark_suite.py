@@ -337,3 +337,23 @@ def test_pictures_come_from_suite_lines(tmp_path):
     assert red(thick) > red(exact)
     with pytest.raises(SystemExit, match="no clean line of slab seed 0 with preset 'quality'"):
         pictures.pick_lines(lines, "slab", ["quality"], None, 0)
+
+
+def test_a_section_names_every_command_that_made_its_fits_once():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    base = {"preset": "fast", "minutes": 15.0, "threads": 2, "machine": {"cpu": "X"},
+            "steps": 100, "fit_wall_s": 900.0, "date": "2026-11-26T10:00:00+00:00",
+            "commit": "bbb", "chamfer": 0.01}
+    compare = ("python benchmarks/compare_commits.py aaa bbb (fits with the commit's "
+               "run_suite.py --scenes {} --seeds {})")
+    lines = [{**base, "scene": s, "seed": k, "command": compare.format(s, k)}
+             for s in ("bunny", "oakChair") for k in (0, 1)]
+    lines.append({**base, "scene": "gen-box-1", "seed": 0,
+                  "command": "python benchmarks/run_suite.py --generated 6"})
+    text = "\n".join(report.suite_section(lines))
+    assert ("5 fits, 2026-11-26 to 2026-11-26; commands: `python benchmarks/compare_commits.py "
+            "aaa bbb`; `python benchmarks/run_suite.py --generated 6`") in text
+    text = "\n".join(report.suite_section(lines[:2]))
+    assert "; command: `python benchmarks/compare_commits.py aaa bbb`\n" in text
