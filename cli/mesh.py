@@ -31,6 +31,14 @@ def mesh(
             help="Drop components smaller than this fraction of the mesh diagonal (0: keep all).",
         ),
     ] = 0.05,
+    component_gap: Annotated[
+        float,
+        typer.Option(
+            "--component-gap",
+            help="Judge small components closer than this fraction of the mesh diagonal "
+            "together (pieces of one thin wire; 0: each alone).",
+        ),
+    ] = 0.01,
     min_component_faces: Annotated[
         int,
         typer.Option(
@@ -89,8 +97,9 @@ def mesh(
         raise ConfigError(f"--format {format}: expected one of {', '.join(MESH_FORMATS)}")
     if res < 8 or res > 2048:
         raise ConfigError(f"--res {res}: expected 8 .. 2048")
-    if decimate < 0 or min_component < 0 or min_component_faces < 0:
-        raise ConfigError("--decimate/--min-component/--min-component-faces must be >= 0")
+    if decimate < 0 or min_component < 0 or min_component_faces < 0 or component_gap < 0:
+        raise ConfigError(
+            "--decimate/--min-component/--component-gap/--min-component-faces must be >= 0")
     run_dir = Path(run) if run is not None else latest_run(runs_root)
     if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
         run_dir = latest_run(run_dir)  # a runs root was given: use its latest run
@@ -109,6 +118,7 @@ def mesh(
     options = PostprocessOptions(
         enabled=not no_postprocess,
         min_component_diameter=min_component or None,
+        component_gap=component_gap,
         min_component_faces=min_component_faces or None,
         keep_largest=keep_largest,
         remove_cavities=remove_cavities,

@@ -64,7 +64,8 @@ def test_fit_only_then_score_runs_elsewhere(tiny_scene, tmp_path):
     assert [c[1] for c in line["curve"]] == [3, 6] and line["steps"] == 6
     assert (moved / "mesh.ply").is_file() == (line["chamfer"] is not None)
     # scored with and without each mesh clean-up, and stamped
-    assert {"chamfer_unfilled", "chamfer_cavities", "commit", "date", "machine"} <= set(line)
+    assert {"chamfer_unfilled", "chamfer_cavities", "chamfer_ungrouped", "commit", "date",
+            "machine"} <= set(line)
     # the command that fitted it, beside the one that scored it
     assert "--fit-only" in line["fit_command"] and "--score-runs" in line["command"]
     sys.path.insert(0, str(SUITE.parent))

@@ -206,6 +206,36 @@ def test_postprocess_removes_a_small_floater():
     assert len(by_faces.split(only_watertight=False)) == 1
 
 
+def _spheres(centres, radius: float) -> list:
+    import trimesh
+
+    return [trimesh.creation.icosphere(2, radius).apply_translation(c) for c in centres]
+
+
+def test_small_components_in_a_chain_are_judged_together():
+    import trimesh
+
+    from hybridneus.meshing.postprocess import postprocess_mesh, remove_small_components
+
+    body = _spheres([(0.0, 0.0, 0.0)], 0.5)
+    chain = _spheres([(0.6 + 0.05 * i, 0.0, 0.0) for i in range(8)], 0.02)  # 0.01 apart
+    lone = _spheres([(0.0, 0.8, 0.0)], 0.02)
+    hugging = _spheres([(-0.53, 0.0, 0.0)], 0.02)  # 0.01 off the body: still a floater
+    mesh = trimesh.util.concatenate(body + chain + lone + hugging)
+    kept = remove_small_components(mesh, min_diameter=0.1, gap=0.02)
+    parts = kept.split(only_watertight=False)
+    assert len(parts) == 1 + 8  # the body and every piece of the chain
+    assert kept.vertices[:, 1].max() < 0.51 and kept.vertices[:, 0].min() > -0.51
+    alone = remove_small_components(mesh, min_diameter=0.1, gap=0.0)
+    assert len(alone.split(only_watertight=False)) == 1
+    options = PostprocessOptions(merge_distance=0.0, component_gap=0.02 / 2.0)
+    # the options' gap is a fraction of the whole diagonal (about 2.0 here)
+    by_options = postprocess_mesh(mesh, options)
+    assert len(by_options.split(only_watertight=False)) == 9
+    by_options = postprocess_mesh(mesh, PostprocessOptions(merge_distance=0.0, component_gap=0))
+    assert len(by_options.split(only_watertight=False)) == 1
+
+
 class _HollowBall(SphereField):
     """A ball of radius 0.5 with a closed hollow of radius 0.25 inside."""
 

@@ -6,7 +6,9 @@ Order (each step optional, see :class:`PostprocessOptions`):
     2. merge vertices closer than ``merge_distance``; remove duplicate and zero-area faces;
     3. repair non-manifold edges (by removing faces) and vertices (by splitting);
     4. remove connected components smaller than ``min_component_diameter`` (fraction of the
-       whole mesh's bounding-box diagonal) and/or with fewer than ``min_component_faces`` faces;
+       whole mesh's bounding-box diagonal; small components within ``component_gap`` of each
+       other are judged as one, see :func:`remove_small_components`) and/or with fewer than
+       ``min_component_faces`` faces;
     5. ``remove_cavities``: drop closed components that face inwards (the walls of hollows
        inside matter, which no camera can see);
     6. ``keep_largest``: keep only the component with the most faces;
@@ -35,6 +37,9 @@ class PostprocessOptions:
         repair_non_manifold: remove faces on non-manifold edges, split non-manifold vertices.
         min_component_diameter: drop components whose bounding-box diagonal is below this
             fraction of the whole mesh's diagonal (0.05 = 5%); None or 0 disables.
+        component_gap: small components (those below ``min_component_diameter``) closer than
+            this fraction of the whole mesh's diagonal to each other are judged together, by
+            the diagonal of their joint bounding box; None or 0 judges each alone.
         min_component_faces: drop components with fewer faces; None or 0 disables.
         remove_cavities: drop closed components with negative signed volume: the inner
             walls of hollows enclosed by matter (see :func:`remove_cavities`).
@@ -57,6 +62,7 @@ class PostprocessOptions:
     remove_duplicate_faces: bool = True
     repair_non_manifold: bool = True
     min_component_diameter: float | None = 0.05
+    component_gap: float | None = 0.01
     min_component_faces: int | None = None
     remove_cavities: bool = True
     keep_largest: bool = False
@@ -187,6 +193,59 @@ def remove_cavities(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return _rebuild(vertices, faces[~cavity[labels]], _vertex_colors(mesh))
 
 
+def remove_small_components(
+    mesh: trimesh.Trimesh, min_diameter: float, gap: float = 0.0
+) -> trimesh.Trimesh:
+    """Drop the connected components whose bounding-box diagonal is below ``min_diameter``.
+
+    A thin part that the field holds all along (a wire, a rod one or two voxels wide) often
+    comes out of marching cubes as a chain of short pieces, each far below any sensible
+    floater size, with gaps of a voxel or two between them; a floater is a lump alone in free
+    space. So the small components are first joined wherever two of them come closer than
+    ``gap`` (world units, vertex to vertex), and a group is kept when its joint bounding box
+    reaches ``min_diameter``. Only small components join each other: lying next to the main
+    body does not save a lump. ``gap`` = 0 judges each component alone. Colours are kept.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    faces = np.asarray(mesh.faces)
+    if faces.shape[0] == 0:
+        return mesh
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    face_label = face_components(faces, vertices.shape[0])
+    n = int(face_label.max()) + 1
+    vertex_label = np.full(vertices.shape[0], -1, dtype=np.int64)
+    vertex_label[faces.reshape(-1)] = np.repeat(face_label, 3)
+    used = vertex_label >= 0
+    lo = np.full((n, 3), np.inf)
+    hi = np.full((n, 3), -np.inf)
+    np.minimum.at(lo, vertex_label[used], vertices[used])
+    np.maximum.at(hi, vertex_label[used], vertices[used])
+    small = np.linalg.norm(hi - lo, axis=1) < min_diameter
+    if not small.any():
+        return mesh
+    group = np.arange(n)
+    if gap > 0:
+        members = np.flatnonzero(used & small[np.maximum(vertex_label, 0)])
+        pairs = cKDTree(vertices[members]).query_pairs(gap, output_type="ndarray")
+        a, b = vertex_label[members[pairs[:, 0]]], vertex_label[members[pairs[:, 1]]]
+        link = a != b
+        graph = coo_matrix((np.ones(int(link.sum()), dtype=np.int8), (a[link], b[link])), (n, n))
+        _, group = connected_components(graph, directed=False)
+        n_groups = int(group.max()) + 1
+        glo = np.full((n_groups, 3), np.inf)
+        ghi = np.full((n_groups, 3), -np.inf)
+        np.minimum.at(glo, group, lo)
+        np.maximum.at(ghi, group, hi)
+        lo, hi = glo[group], ghi[group]
+    drop = small & (np.linalg.norm(hi - lo, axis=1) < min_diameter)
+    if not drop.any():
+        return mesh
+    return _rebuild(vertices, faces[~drop[face_label]], _vertex_colors(mesh))
+
+
 def keep_largest_component(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """Only the connected component with the most faces (colours kept)."""
     faces = np.asarray(mesh.faces)
@@ -232,16 +291,16 @@ def postprocess_mesh(
     if options.repair_non_manifold:
         ms.meshing_repair_non_manifold_edges(method="Remove Faces")
         ms.meshing_repair_non_manifold_vertices()
-    if options.min_component_diameter:
-        ms.meshing_remove_connected_component_by_diameter(
-            mincomponentdiag=pymeshlab.PureValue(options.min_component_diameter * diag)
-        )
     if options.min_component_faces:
         ms.meshing_remove_connected_component_by_face_number(
             mincomponentsize=int(options.min_component_faces)
         )
     ms.meshing_remove_unreferenced_vertices()
     result = _from_meshset(ms, colors is not None)
+    if options.min_component_diameter:
+        result = remove_small_components(
+            result, options.min_component_diameter * diag, (options.component_gap or 0.0) * diag
+        )
     if options.remove_cavities:
         result = remove_cavities(result)
     if options.keep_largest:
