@@ -10,6 +10,12 @@ ran the fits.
 
     python benchmarks/pictures.py gen-cage-56731231 --commit 3bc7531 \\
         --presets fast "fast priors.hull.enabled=false" --out docs/images/cage.png
+
+``--ungrouped`` puts the same field's mesh with the floater filter judging each component
+alone (the clean-up before ``component_gap``; the line's ``chamfer_ungrouped``) above each
+block: a before/after of that clean-up step with no training noise between them. The suite
+keeps that mesh as ``mesh_ungrouped.ply``; for a run scored before it did, it is made again
+from the run's last snapshot, the way the suite made it.
 """
 
 from __future__ import annotations
@@ -42,14 +48,45 @@ def pick_lines(lines: list[dict], scene: str, presets: list[str], commit: str | 
     return picked
 
 
-def caption(line: dict) -> str:
+def caption(line: dict, ungrouped: bool = False) -> str:
     budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
-    return (f"{line['preset']} | {line['commit']} | {budget} | seed {line['seed']} | "
-            f"Chamfer {line['chamfer']:.4f}")
+    preset = line["preset"] + (", components judged alone" if ungrouped else "")
+    cd = line["chamfer_ungrouped"] if ungrouped else line["chamfer"]
+    return (f"{preset} | {line['commit']} | {budget} | seed {line['seed']} | "
+            f"Chamfer {cd:.4f}")
 
 
-def picture(lines: list[dict], vmax: float, size: int) -> np.ndarray:
-    """The error images of ``lines``' meshes, one block each under its caption."""
+def ungrouped_mesh(line: dict) -> Path:
+    """The run's mesh with components judged alone (``component_gap`` 0), made again from its
+    last snapshot as the suite made it when the run folder does not hold it yet."""
+    run = Path(line["run"])
+    path = run / "mesh_ungrouped.ply"
+    if path.is_file():
+        return path
+    if "chamfer_ungrouped" not in line:
+        raise SystemExit(f"pictures: {run}: its line was scored without chamfer_ungrouped")
+    import suite_jobs
+
+    from hybridneus.config import load_config
+    from hybridneus.data.dataset import read_camera_centres
+    from hybridneus.meshing import PostprocessOptions, extract_mesh
+    from hybridneus.meshing.convert import save_mesh
+
+    snaps = suite_jobs.snapshots(run)
+    if not snaps:
+        raise SystemExit(f"pictures: {run}: no snapshots/ to mesh again")
+    cfg = load_config(run / "config.yaml")
+    field, _ = suite_jobs.load_snapshot(cfg, snaps[-1])
+    cameras = read_camera_centres(Path(line["dataset"]) / cfg.data.split)
+    mesh = extract_mesh(field, res=int(line["res"]), progress=False, cameras=cameras,
+                        postprocess=PostprocessOptions(component_gap=0.0))
+    save_mesh(mesh, path)
+    return path
+
+
+def picture(lines: list[dict], vmax: float, size: int, ungrouped: bool = False) -> np.ndarray:
+    """The error images of ``lines``' meshes, one block each under its caption (with
+    ``ungrouped``, the same field's mesh with components judged alone above each)."""
     import cv2
     import trimesh
 
@@ -63,12 +100,14 @@ def picture(lines: list[dict], vmax: float, size: int) -> np.ndarray:
             if not path.is_file():
                 raise SystemExit(f"pictures: {path}: missing (make pictures where the suite "
                                  "ran)")
-        image = error_image(trimesh.load(mesh_path, force="mesh"),
-                            trimesh.load(gt_path, force="mesh"), vmax=vmax, size=size)
-        title = np.full((26, image.shape[1], 3), 235, np.uint8)
-        cv2.putText(title, caption(line), (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1,
-                    cv2.LINE_AA)
-        blocks += [title, image]
+        gt = trimesh.load(gt_path, force="mesh")
+        meshes = [(ungrouped_mesh(line), True)] if ungrouped else []
+        for path, alone in [*meshes, (mesh_path, False)]:
+            image = error_image(trimesh.load(path, force="mesh"), gt, vmax=vmax, size=size)
+            title = np.full((26, image.shape[1], 3), 235, np.uint8)
+            cv2.putText(title, caption(line, alone), (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+                        (0, 0, 0), 1, cv2.LINE_AA)
+            blocks += [title, image]
     return np.concatenate(blocks, axis=0)
 
 
@@ -83,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--vmax", type=float, default=0.02, help="distance drawn in full red")
     ap.add_argument("--size", type=int, default=256, help="pixels per view")
     ap.add_argument("--out", type=Path, required=True, help="PNG to write")
+    ap.add_argument("--ungrouped", action="store_true",
+                    help="also the same fields' meshes with components judged alone (before)")
     args = ap.parse_args(argv)
 
     from PIL import Image
@@ -91,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
 
     lines = pick_lines(common.read_lines(args.results), args.scene, args.presets, args.commit,
                        args.seed)
-    image = picture(lines, args.vmax, args.size)
+    image = picture(lines, args.vmax, args.size, args.ungrouped)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(args.out, suffix=".png") as tmp:
         Image.fromarray(image).save(tmp, format="PNG")

@@ -179,6 +179,55 @@ def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
     return [*out, ""]
 
 
+CLEANUP_STEPS = (("chamfer_ungrouped", "components judged alone"),
+                 ("chamfer_unfilled", "unseen space kept"),
+                 ("chamfer_cavities", "cavities kept"))
+
+
+def cleanup_section(lines: list[dict]) -> list[str]:
+    """Each mesh clean-up step on the same fields: the default mesh's CD beside the CD with
+    one step switched off, per (commit, preset, budget, machine) whose lines score them all.
+
+    The field is the same, so a difference is the step's alone, with no seed noise in it."""
+    keys = [k for k, _ in CLEANUP_STEPS]
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in lines:
+        if all(k in r for k in keys) and r.get("chamfer") is not None:
+            groups[(r["commit"], r["preset"], _budget(r), _cpu(r))].append(r)
+    if not groups:
+        return []
+    out = ["## Mesh clean-up on the same fields", "",
+           "Every suite fit is meshed with the default clean-up and again with one step "
+           "switched off (docs/meshing.md); per scene the mean CD over its seeds. A step "
+           "helps where its column is higher than the default's.", ""]
+    for (commit, preset, budget, cpu), rows in sorted(groups.items(), key=lambda kv: (
+            kv[1][0]["date"], kv[0])):
+        by_scene: dict[str, list[dict]] = defaultdict(list)
+        for r in rows:
+            by_scene[r["scene"]].append(r)
+        out += [f"### `{preset}`, {budget}, commit {commit}, {cpu}", "",
+                "| scene | seeds | CD default | "
+                + " | ".join(name for _, name in CLEANUP_STEPS) + " |",
+                "|---|---|---|" + "---|" * len(CLEANUP_STEPS)]
+        means: dict[str, list[list[float]]] = defaultdict(list)
+        for scene in sorted(by_scene, key=lambda s: (s.startswith("gen-"), s)):
+            rs = by_scene[scene]
+            row = [statistics.mean(r["chamfer"] for r in rs)]
+            for k in keys:
+                vs = [r[k] for r in rs if r[k] is not None]
+                row.append(statistics.mean(vs) if len(vs) == len(rs) else None)
+            for group in _groups(scene):
+                means[group].append(row)
+            out.append(f"| {scene} | {len(rs)} | " + " | ".join(_f(v) for v in row) + " |")
+        for name, rows_ in means.items():
+            cols = [None if any(r[i] is None for r in rows_)
+                    else statistics.mean(r[i] for r in rows_) for i in range(len(keys) + 1)]
+            out.append(f"| **mean, {name}** | | " + " | ".join(f"**{_f(v)}**" for v in cols)
+                       + " |")
+        out.append("")
+    return out
+
+
 def _cd(r: dict) -> float | None:
     return r.get("chamfer")
 
@@ -387,6 +436,7 @@ def build(compare: list[tuple[str, str]]) -> str:
         out += compare_section(suite, base, new)
     out += variant_section(suite)
     out += suite_section(suite)
+    out += cleanup_section(suite)
     out += speed_section(results)
     return "\n".join(out).rstrip() + "\n"
 

@@ -148,20 +148,36 @@ def _image_metrics(field, dataset, n_views: int) -> dict:
     return {"psnr": float(np.mean(psnrs)), "ssim": float(np.mean(ssims))}
 
 
+def snapshots(run_dir: Path) -> list[Path]:
+    """A run's snapshots (``snapshots/t<elapsed>-s<step>.pt``), oldest step first."""
+    return sorted((run_dir / "snapshots").glob("t*.pt"),
+                  key=lambda p: int(p.stem.split("-s")[1]))
+
+
+def load_snapshot(cfg, path: Path):
+    """(field in eval mode, snapshot dict) of one :func:`fit_run` snapshot."""
+    import torch
+
+    from hybridneus.training.runs import build_field
+
+    snap = torch.load(path, map_location="cpu", weights_only=True)
+    f = build_field(cfg, snap["scene"])
+    f.load_state_dict(snap["model"])
+    f.update_step(int(snap["step"]), int(snap["total_steps"]))
+    return f.eval(), snap
+
+
 def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = None) -> dict:
     """The Chamfer-versus-time curve and the final field's metrics of a :func:`fit_run` folder.
 
     ``cache``: where to look for the dataset (by folder name) when the path recorded in
     ``fit.json`` does not exist here (a fit made on another machine).
     """
-    import torch
-
     from hybridneus.config import load_config
     from hybridneus.data import load_dataset
     from hybridneus.data.dataset import read_camera_centres
     from hybridneus.evaluation.geometry import sdf_mae
     from hybridneus.meshing.convert import load_mesh, save_mesh
-    from hybridneus.training.runs import build_field
 
     for name in ("fit.json", "config.yaml"):
         if not (run_dir / name).is_file():
@@ -174,35 +190,29 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
         raise SystemExit(f"{run_dir / 'fit.json'}: dataset {dataset.name} not found here")
     cfg = load_config(run_dir / "config.yaml")
     gt = load_mesh(dataset / "gt_mesh.ply")
-    snaps = sorted((run_dir / "snapshots").glob("t*.pt"),
-                   key=lambda p: int(p.stem.split("-s")[1]))
+    snaps = snapshots(run_dir)
     if not snaps:
         raise SystemExit(f"{run_dir}: no snapshots/ to score")
-
-    def load(path: Path):
-        snap = torch.load(path, map_location="cpu", weights_only=True)
-        f = build_field(cfg, snap["scene"])
-        f.load_state_dict(snap["model"])
-        f.update_step(int(snap["step"]), int(snap["total_steps"]))
-        return f.eval(), snap
 
     cameras = read_camera_centres(dataset / cfg.data.split)
     curve = []
     for path in snaps[:-1]:
-        f, snap = load(path)
+        f, snap = load_snapshot(cfg, path)
         score, _ = _score(f, gt, res, cameras)
         curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), score["chamfer"]])
-    field, snap = load(snaps[-1])
+    field, snap = load_snapshot(cfg, snaps[-1])
     final, mesh = _score(field, gt, res, cameras)
     curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), final["chamfer"]])
     unfilled, _ = _score(field, gt, res)
     cavities, _ = _score(field, gt, res, cameras, keep_cavities=True)
-    ungrouped, _ = _score(field, gt, res, cameras, component_gap=0.0)
+    ungrouped, ungrouped_mesh = _score(field, gt, res, cameras, component_gap=0.0)
     report = {**info, "run": str(run_dir), "res": res, **final, "curve": curve,
               "chamfer_unfilled": unfilled["chamfer"], "chamfer_cavities": cavities["chamfer"],
               "chamfer_ungrouped": ungrouped["chamfer"]}
     if mesh is not None and len(mesh.faces):
         save_mesh(mesh, run_dir / "mesh.ply")
+        if len(ungrouped_mesh.faces):  # for before/after pictures (benchmarks/pictures.py)
+            save_mesh(ungrouped_mesh, run_dir / "mesh_ungrouped.ply")
         report["sdf_mae"] = float(sdf_mae(mesh, gt).mae)
         report.update(_image_metrics(field, load_dataset(dataset), image_views))
     report["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)

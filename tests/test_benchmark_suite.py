@@ -338,6 +338,17 @@ def test_pictures_come_from_suite_lines(tmp_path):
     assert red(thick) > red(exact)
     with pytest.raises(SystemExit, match="no clean line of slab seed 0 with preset 'quality'"):
         pictures.pick_lines(lines, "slab", ["quality"], None, 0)
+    # --ungrouped: the same field's mesh with components judged alone, above the default's
+    trimesh.creation.box(extents=(0.5, 0.16, 0.4)).export(Path(lines[1]["run"])
+                                                           / "mesh_ungrouped.ply")
+    lines[1]["chamfer_ungrouped"] = 0.03
+    both = pictures.picture(lines[1:], 0.02, 64, ungrouped=True)
+    assert both.shape[0] == 2 * single.shape[0]
+    assert red(both[:single.shape[0]]) > red(both[single.shape[0]:])
+    assert pictures.caption(lines[1], True).endswith("judged alone | abc1234 | 100 steps | "
+                                                     "seed 0 | Chamfer 0.0300")
+    with pytest.raises(SystemExit, match="scored without chamfer_ungrouped"):
+        pictures.picture(lines[:1], 0.02, 64, ungrouped=True)
 
 
 def test_a_section_names_every_command_that_made_its_fits_once():
@@ -358,3 +369,20 @@ def test_a_section_names_every_command_that_made_its_fits_once():
             "aaa bbb`; `python benchmarks/run_suite.py --generated 6`") in text
     text = "\n".join(report.suite_section(lines[:2]))
     assert "; command: `python benchmarks/compare_commits.py aaa bbb`\n" in text
+
+
+def test_clean_up_steps_are_set_beside_the_default_mesh_of_the_same_fits():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    base = {"preset": "fast", "minutes": 15.0, "threads": 2, "machine": {"cpu": "X"},
+            "steps": 100, "fit_wall_s": 900.0, "date": "2026-11-26T10:00:00+00:00",
+            "commit": "bbb", "command": "run_suite.py", "chamfer_unfilled": 0.02,
+            "chamfer_cavities": 0.01}
+    lines = [{**base, "scene": "gen-cage-1", "seed": k, "chamfer": 0.01,
+              "chamfer_ungrouped": u} for k, u in ((0, 0.02), (1, 0.04))]
+    lines.append({**base, "scene": "bunny", "seed": 0, "chamfer": 0.01})  # scored before
+    text = "\n".join(report.cleanup_section(lines))
+    assert "| gen-cage-1 | 2 | 0.0100 | 0.0300 | 0.0200 | 0.0100 |" in text
+    assert "bunny" not in text  # its line lacks one of the steps
+    assert report.cleanup_section(lines[2:]) == []
