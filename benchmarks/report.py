@@ -91,24 +91,32 @@ def _how(r: dict) -> str:
     return f"`{command}`"
 
 
+def _runs(lines: list[dict]):
+    """``lines`` grouped by (commit, preset, budget, machine), oldest first: yields each key,
+    its lines, and its lines by scene as (scene, lines) pairs, assets before generated
+    objects."""
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in lines:
+        groups[(r["commit"], r["preset"], _budget(r), _cpu(r))].append(r)
+    for key, rows in sorted(groups.items(), key=lambda kv: (kv[1][0]["date"], kv[0])):
+        by_scene: dict[str, list[dict]] = defaultdict(list)
+        for r in rows:
+            by_scene[r["scene"]].append(r)
+        yield key, rows, [(scene, by_scene[scene]) for scene in
+                          sorted(by_scene, key=lambda s: (s.startswith("gen-"), s))]
+
+
 def suite_section(lines: list[dict]) -> list[str]:
     """Accuracy: per (commit, preset, budget, machine) the mean CD per scene over seeds;
     variants with their preset beside them are in :func:`variant_section` instead."""
-    groups: dict[tuple, list[dict]] = defaultdict(list)
     paired = _with_base(lines)
-    for r in lines:
-        if (*_run_key(r), r["preset"]) not in paired:
-            groups[(r["commit"], r["preset"], _budget(r), _cpu(r))].append(r)
+    alone = [r for r in lines if (*_run_key(r), r["preset"]) not in paired]
     out = ["## Accuracy", "",
            "Chamfer distance (the paper's protocol, lower is better) of `hybridneus mesh`'s "
            "mesh against the simulator's ground truth; per scene the mean over seeds and "
            "their range. `gen-<kind>-<seed>` are generated objects "
            "(`hybridneus.simulate.generated`); their means are per kind.", ""]
-    for (commit, preset, budget, cpu), rows in sorted(groups.items(), key=lambda kv: (
-            kv[1][0]["date"], kv[0])):
-        by_scene: dict[str, list[dict]] = defaultdict(list)
-        for r in rows:
-            by_scene[r["scene"]].append(r)
+    for (commit, preset, budget, cpu), rows, scenes in _runs(alone):
         dates = sorted(r["date"][:10] for r in rows)
         hows = list(dict.fromkeys(_how(r) for r in rows))  # each command once, in order
         how = ("command: " if len(hows) == 1 else "commands: ") + "; ".join(hows)
@@ -118,8 +126,7 @@ def suite_section(lines: list[dict]) -> list[str]:
                 "| first step s |",
                 "|---|---|---|---|---|---|---|---|"]
         means: dict[str, list[float]] = defaultdict(list)
-        for scene in sorted(by_scene, key=lambda s: (s.startswith("gen-"), s)):
-            rs = by_scene[scene]
+        for scene, rs in scenes:
             cds = [r["chamfer"] for r in rs if r.get("chamfer") is not None]
             failed = len(rs) - len(cds)
             mean = statistics.mean(cds) if cds else None
@@ -190,28 +197,21 @@ def cleanup_section(lines: list[dict]) -> list[str]:
 
     The field is the same, so a difference is the step's alone, with no seed noise in it."""
     keys = [k for k, _ in CLEANUP_STEPS]
-    groups: dict[tuple, list[dict]] = defaultdict(list)
-    for r in lines:
-        if all(k in r for k in keys) and r.get("chamfer") is not None:
-            groups[(r["commit"], r["preset"], _budget(r), _cpu(r))].append(r)
-    if not groups:
+    runs = list(_runs([r for r in lines
+                       if all(k in r for k in keys) and r.get("chamfer") is not None]))
+    if not runs:
         return []
     out = ["## Mesh clean-up on the same fields", "",
            "Every suite fit is meshed with the default clean-up and again with one step "
            "switched off (docs/meshing.md); per scene the mean CD over its seeds. A step "
            "helps where its column is higher than the default's.", ""]
-    for (commit, preset, budget, cpu), rows in sorted(groups.items(), key=lambda kv: (
-            kv[1][0]["date"], kv[0])):
-        by_scene: dict[str, list[dict]] = defaultdict(list)
-        for r in rows:
-            by_scene[r["scene"]].append(r)
+    for (commit, preset, budget, cpu), _, scenes in runs:
         out += [f"### `{preset}`, {budget}, commit {commit}, {cpu}", "",
                 "| scene | seeds | CD default | "
                 + " | ".join(name for _, name in CLEANUP_STEPS) + " |",
                 "|---|---|---|" + "---|" * len(CLEANUP_STEPS)]
         means: dict[str, list[list[float]]] = defaultdict(list)
-        for scene in sorted(by_scene, key=lambda s: (s.startswith("gen-"), s)):
-            rs = by_scene[scene]
+        for scene, rs in scenes:
             row = [statistics.mean(r["chamfer"] for r in rs)]
             for k in keys:
                 vs = [r[k] for r in rs if r[k] is not None]
