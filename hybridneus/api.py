@@ -168,7 +168,7 @@ def _fix_budget(trainer, logger, end: float) -> None:
     are written first and timed, so that their share of the budget is known."""
     import time
 
-    from hybridneus.training.budget import budget_steps
+    from hybridneus.training.budget import BudgetPlan, budget_steps
 
     t = trainer.cfg.train
     overhead, save = 0.0, 0.0
@@ -184,7 +184,7 @@ def _fix_budget(trainer, logger, end: float) -> None:
             overhead += (time.perf_counter() - tick) / t.preview_every
     # the final checkpoint and curve come after the last step
     left = end - time.perf_counter() - 2.0 * save - 0.5
-    steps, how = budget_steps(trainer, max(left, 0.0), overhead)
+    steps, how, costs = budget_steps(trainer, max(left, 0.0), overhead)
     if steps < MIN_BUDGET_STEPS:
         spent = t.minutes * 60.0 - (end - time.perf_counter())
         raise ConfigError(f"train.minutes: {t.minutes:g} min leave time for {steps} steps after "
@@ -193,6 +193,8 @@ def _fix_budget(trainer, logger, end: float) -> None:
     trainer.total_steps = trainer.record.steps = steps
     trainer.record.steps_from = how
     trainer.deadline = end - save - 0.5
+    if t.replan_at:
+        trainer.plan = BudgetPlan(costs, trainer.deadline, tuple(t.replan_at))
 
 
 def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequence[str], dev):

@@ -1,4 +1,5 @@
-"""A --minutes budget becomes a step count before the first step, recorded and repeatable."""
+"""A --minutes budget becomes a step count before the first step, recorded and repeatable,
+and is shortened during the fit when the steps run slower than the probe measured."""
 
 from __future__ import annotations
 
@@ -9,13 +10,88 @@ import torch
 from fitting import params, tiny
 
 from hybridneus.api import fit, prepare
-from hybridneus.training.budget import mean_step_seconds, step_seconds
+from hybridneus.training.budget import BudgetPlan, StepCosts, mean_step_seconds, step_seconds
 from hybridneus.training.scene import SceneRecord
 
 
 def test_the_mean_step_interpolates_the_probe_points():
     # 0.4 * (1 + 3) / 2 + 0.5 * (3 + 2) / 2 + 0.1 * 2 = 0.8 + 1.25 + 0.2, plus 1 / 10
     assert mean_step_seconds(1.0, 3.0, 2.0, 1.0, 0.4, 10) == pytest.approx(2.35)
+
+
+def test_the_mean_over_part_of_the_schedule_is_the_average_of_the_interpolated_cost():
+    costs = StepCosts(1.0, 3.0, 2.0, 0.5, 0.4, 10, overhead=0.25)
+    for p0, p1 in [(0.0, 1.0), (0.1, 0.3), (0.35, 0.95), (0.92, 1.0)]:
+        grid = torch.linspace(p0, p1, 20001, dtype=torch.float64)
+        knots = torch.tensor([0.0, 0.4, 0.9, 1.0], dtype=torch.float64)
+        values = torch.tensor([1.0, 3.0, 2.0, 2.0], dtype=torch.float64)
+        i = torch.clamp(torch.searchsorted(knots, grid, right=True) - 1, 0, 2)
+        w = (grid - knots[i]) / (knots[i + 1] - knots[i])
+        numeric = float((values[i] + w * (values[i + 1] - values[i])).mean())
+        assert costs.mean(p0, p1) == pytest.approx(numeric + 0.05 + 0.25, rel=1e-3)
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _budgeted_run(pace: float, at: tuple[float, ...]) -> tuple[object, bool, BudgetPlan]:
+    """Steps that each take ``pace`` times what the probe predicted for them, on a planned
+    1000-step schedule whose probe said it fills 100 s exactly; runs to the schedule's end or
+    the deadline. Returns (trainer, whether it ended by the deadline, plan)."""
+    from types import SimpleNamespace
+
+    costs = StepCosts(0.05, 0.12, 0.1, 0.2, 0.3, 16)
+    total = 1000
+    end = costs.mean(0.0) * total
+    trainer = SimpleNamespace(step=0, total_steps=total,
+                              record=SimpleNamespace(steps=total, steps_from="budget"))
+    clock = _Clock()
+    plan = BudgetPlan(costs, end, at, clock=clock)
+    plan.start(0)
+    while trainer.step < trainer.total_steps and clock.now < end:
+        p = trainer.step / trainer.total_steps
+        clock.now += pace * costs.mean(p, p + 1.0 / trainer.total_steps)
+        trainer.step += 1
+        plan.after_step(trainer)
+    return trainer, clock.now <= end, plan
+
+
+def test_a_plan_shortens_an_overrunning_schedule_so_that_it_ends_in_time():
+    """At 1.3x the probe's step time a fixed schedule stops at its deadline near 77%; the plan
+    shortens it once it has measured the pace, and the fit reaches the schedule's end in time."""
+    fixed, _, _ = _budgeted_run(1.3, at=())
+    assert fixed.step < 0.8 * fixed.total_steps
+    trainer, in_time, plan = _budgeted_run(1.3, at=(0.05, 0.15, 0.3, 0.5, 0.7))
+    assert trainer.step == trainer.total_steps and in_time
+    assert 700 <= trainer.total_steps < 1000 and trainer.record.steps == trainer.total_steps
+    assert plan.replans and "re-planned at step" in trainer.record.steps_from
+    assert "1.30x the probe's time" in plan.replans[0]
+
+
+def test_a_plan_never_lengthens_a_schedule():
+    trainer, _, plan = _budgeted_run(0.7, at=(0.05, 0.15, 0.3, 0.5, 0.7))
+    assert trainer.total_steps == 1000 and not plan.replans
+
+
+def test_a_budgeted_fit_slower_than_its_probe_is_replanned_and_finishes(scene, tmp_path,
+                                                                        monkeypatch):
+    """A probe that claims 5 ms per step plans far too many steps for a 15 s budget; the fit
+    shortens its schedule, runs to the end of it, and records the re-plan."""
+    import hybridneus.training.budget as budget
+
+    monkeypatch.setattr(budget, "step_seconds", lambda trainer: (0.005, 0.005, 0.005, 0.0))
+    started = time.perf_counter()
+    field = fit(scene, tiny("train.minutes=0.25", "train.seed=1"), out=tmp_path,
+                device="cpu", started=started)
+    record = SceneRecord.load(field.run_dir / "scene.yaml")
+    assert "re-planned at step" in record.steps_from, record.steps_from
+    assert record.stopped_at is None and field.trainer_step == record.steps
+    assert time.perf_counter() - started < 15.0 + 5.0
 
 
 def test_probing_leaves_the_trainer_as_it_was(scene):

@@ -42,6 +42,8 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("render.empty_share", _fraction, "a share in [0, 1]"),
     ("train.iters", lambda v: v >= 1, ">= 1"),
     ("train.minutes", lambda v: v >= 0, ">= 0 (0: no budget)"),
+    ("train.replan_at", lambda v: all(0 < a < 1 for a in v) and list(v) == sorted(v),
+     "ascending fractions of training in (0, 1)"),
     ("train.n_rays", lambda v: v >= 0, ">= 0 (0: the device's default)"),
     ("train.lr", lambda v: v > 0, "> 0"),
     ("train.lr_variance", lambda v: v >= 0, ">= 0"),

@@ -85,12 +85,18 @@ class LossConfig:
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
 
 
+#: Where a budgeted fit (``train.minutes``) compares its pace with the probe's and shortens a
+#: schedule that would overrun (fractions of training; ``[]``: the step count stays as planned).
+REPLAN_AT = (0.05, 0.15, 0.3, 0.5, 0.7)
+
+
 @dataclass
 class TrainConfig:
     """Optimiser, length and logging. Schedules are fractions of training."""
 
     iters: int = 2000  # steps, unless train.minutes sets a budget
-    minutes: float = 0.0  # wall-clock budget of the whole fit (0: none); turned into steps once
+    minutes: float = 0.0  # wall-clock budget of the whole fit (0: none); turned into steps
+    replan_at: list[float] = field(default_factory=lambda: list(REPLAN_AT))  # budget re-plans
     n_rays: int = 0  # pixels per step, each at both window ends (0: 256 on CPU, 1024 on CUDA)
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)

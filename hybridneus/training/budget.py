@@ -8,13 +8,28 @@ start, where all levels are open, and near the end) on the trainer's own data, a
 everything back (parameters, optimiser, random states), so the fit starts exactly as if it had
 not been probed. The step count is recorded in the run's ``scene.yaml``; ``--iters`` with it
 repeats the run's schedule on any machine.
+
+A fresh field is cheaper to step than a trained one (more of a trained field's volume is
+surface, and its occupancy refresh marches further), and a machine's speed drifts, so the
+probe alone overestimated a 15-minute fit's steps by 5-30% and such fits stopped at their
+deadline with 70-80% of their schedule done: the learning rate never decayed and the late
+priors never faded. :class:`BudgetPlan` therefore re-plans at a few points of training
+(``train.replan_at``): it compares the wall-clock time the last stretch of steps took with
+what the probe predicted for them and, if the rest would overrun, shortens the schedule to
+what the time left allows at the measured pace. It only ever shortens: a schedule is not
+stretched past what the probe promised. Each re-plan is logged and recorded in
+``scene.yaml``; ``--iters`` with the final count follows the re-planned schedule's length
+but not its jumps in progress, so it repeats such a run closely rather than exactly.
 """
 
 from __future__ import annotations
 
 import copy
+import logging
 import statistics
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 #: Steps timed per probe point, after the warm-up steps.
 PROBE_STEPS = 5
@@ -74,13 +89,110 @@ def mean_step_seconds(first: float, full: float, late: float, refresh: float, fu
     """The mean cost of a step over a whole schedule, the cost interpolated linearly between
     the probe points (0, ``first``), (``full_at``, ``full``), (``LATE``, ``late``) and held
     after the last; one refresh every ``occupancy_every`` steps."""
-    per_step = (full_at * (first + full) / 2.0 + (LATE - full_at) * (full + late) / 2.0
-                + (1.0 - LATE) * late)
-    return per_step + refresh / max(occupancy_every, 1)
+    return StepCosts(first, full, late, refresh, full_at, occupancy_every).mean(0.0)
 
 
-def budget_steps(trainer, seconds: float, overhead: float = 0.0) -> tuple[int, str]:
-    """The number of steps that fit ``seconds`` of training, and one line on how.
+@dataclass
+class StepCosts:
+    """The probe's seconds per step as a function of progress (see :func:`step_seconds`),
+    plus the seconds per step spent outside it (``overhead``: previews, checkpoints)."""
+
+    first: float
+    full: float
+    late: float
+    refresh: float
+    full_at: float
+    occupancy_every: int
+    overhead: float = 0.0
+
+    def _knots(self) -> list[tuple[float, float]]:
+        return [(0.0, self.first), (self.full_at, self.full), (LATE, self.late), (1.0, self.late)]
+
+    def _integral(self, p: float) -> float:
+        """The integral of the interpolated step cost from 0 to ``p``."""
+        total = 0.0
+        knots = self._knots()
+        for (p0, c0), (p1, c1) in zip(knots, knots[1:], strict=False):
+            if p <= p0:
+                break
+            end = min(p, p1)
+            if end > p0:
+                c_end = c0 + (c1 - c0) * (end - p0) / (p1 - p0)
+                total += (end - p0) * (c0 + c_end) / 2.0
+        return total
+
+    def mean(self, p0: float, p1: float = 1.0) -> float:
+        """The mean seconds per step between progress ``p0`` and ``p1`` (refresh and overhead
+        included)."""
+        p0, p1 = min(max(p0, 0.0), 1.0), min(max(p1, 0.0), 1.0)
+        if p1 - p0 < 1e-9:
+            p1 = min(1.0, p0 + 1e-6)
+            p0 = p1 - 1e-6
+        step = (self._integral(p1) - self._integral(p0)) / (p1 - p0)
+        return step + self.refresh / max(self.occupancy_every, 1) + self.overhead
+
+
+@dataclass
+class BudgetPlan:
+    """Shortens a budgeted fit's schedule when its steps run slower than the probe said.
+
+    Call :meth:`after_step` after every step; at each progress point of ``at`` (fractions of
+    the schedule) it measures the seconds the steps since the previous point took against
+    the ``costs`` predicted for them and, when the remaining steps at that ratio would end
+    after ``end`` (a ``clock()`` value), sets the trainer's ``total_steps`` (and its scene
+    record's ``steps``) to what fits.
+
+    Attributes:
+        replans: one line per re-plan that changed the schedule.
+    """
+
+    costs: StepCosts
+    end: float
+    at: tuple[float, ...]
+    clock: Callable[[], float] = time.perf_counter
+    replans: list[str] = field(default_factory=list)
+    _mark: tuple[int, float] | None = None
+    _next: int = 0
+
+    def start(self, step: int) -> None:
+        """Begin timing at ``step`` (the fit's first)."""
+        self._mark = (step, self.clock())
+
+    def after_step(self, trainer) -> None:
+        """Re-plan if ``trainer`` has just passed the next point of ``at``."""
+        if self._mark is None:
+            raise RuntimeError("BudgetPlan.start() was not called before the first step")
+        total = trainer.total_steps
+        p = trainer.step / total
+        if self._next >= len(self.at) or p < self.at[self._next]:
+            return
+        while self._next < len(self.at) and p >= self.at[self._next]:
+            self._next += 1
+        now = self.clock()
+        step0, t0 = self._mark
+        self._mark = (trainer.step, now)
+        done = trainer.step - step0
+        if done <= 0:
+            return
+        predicted = self.costs.mean(step0 / total, p) * done
+        pace = (now - t0) / predicted if predicted > 0 else 1.0
+        left = self.end - now
+        rest = self.costs.mean(p) * pace * HEADROOM
+        fits = trainer.step + max(1, int(left / rest)) if left > 0 else trainer.step + 1
+        if fits >= total:
+            return
+        line = (f"re-planned at step {trainer.step}: {total} -> {fits} steps (the last "
+                f"{done} took {pace:.2f}x the probe's time)")
+        trainer.total_steps = trainer.record.steps = fits
+        trainer.record.steps_from += f"; {line}"
+        self.replans.append(line)
+        logging.getLogger("hybridneus").info(line)
+
+
+def budget_steps(trainer, seconds: float,
+                 overhead: float = 0.0) -> tuple[int, str, StepCosts]:
+    """The number of steps that fit ``seconds`` of training, one line on how, and the probed
+    costs (for a :class:`BudgetPlan`).
 
     Args:
         trainer: a freshly built (or just resumed) trainer; probed, then restored.
@@ -88,10 +200,11 @@ def budget_steps(trainer, seconds: float, overhead: float = 0.0) -> tuple[int, s
         overhead: seconds per step spent outside the step itself (previews, checkpoints).
     """
     first, full, late, refresh = step_seconds(trainer)
-    per_step = mean_step_seconds(first, full, late, refresh, _full_at(trainer),
-                                 trainer.cfg.render.occupancy_every) + overhead
+    costs = StepCosts(first, full, late, refresh, _full_at(trainer),
+                      trainer.cfg.render.occupancy_every, overhead)
+    per_step = costs.mean(0.0)
     steps = max(1, int(seconds / (per_step * HEADROOM)))
     how = (f"a budget of {seconds:.0f} s at {per_step * 1000:.1f} ms per step (probed: "
            f"{first * 1000:.1f}, {full * 1000:.1f} and {late * 1000:.1f} ms at the start, "
            f"with all grid levels and late)")
-    return steps, how
+    return steps, how, costs

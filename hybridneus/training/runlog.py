@@ -115,14 +115,15 @@ class RunLogger:
         write_curve(self.history, self.run_dir / "previews" / "curve.png")
 
     def finish(self, trainer) -> None:
-        """Final checkpoint, curve and (if any) preview; close TensorBoard. A fit stopped at
-        its deadline says so in ``scene.yaml`` (``stopped_at``)."""
-        self.checkpoint(trainer)
-        if getattr(trainer, "stopped_early", False):
-            from hybridneus.training.scene import FILENAME
+        """Final checkpoint, curve and (if any) preview; close TensorBoard. ``scene.yaml`` is
+        written again: a budgeted fit may have re-planned its length, and one stopped at its
+        deadline says so (``stopped_at``)."""
+        from hybridneus.training.scene import FILENAME
 
+        self.checkpoint(trainer)
+        if trainer.stopped_early:
             trainer.record.stopped_at = trainer.step
-            trainer.record.save(self.run_dir / FILENAME)
+        trainer.record.save(self.run_dir / FILENAME)
         if self.history:
             from hybridneus.training.previews import write_curve
 

@@ -67,6 +67,8 @@ class Trainer:
         total_steps: the schedule's length.
         deadline: a ``time.perf_counter()`` value by which :meth:`fit` stops (a wall-clock
             budget), or ``None``.
+        plan: a :class:`~hybridneus.training.budget.BudgetPlan` that may shorten the schedule
+            of a budgeted fit running slower than probed, or ``None``.
         interrupted: set when :meth:`fit` stopped on KeyboardInterrupt.
         stopped_early: set when :meth:`fit` stopped at the deadline before the last step.
     """
@@ -121,6 +123,7 @@ class Trainer:
         self.total_steps = max(1, record.steps)
         self.elapsed = 0.0
         self.deadline: float | None = None
+        self.plan = None
         self.interrupted = self.stopped_early = False
         self.occupied_fraction = 1.0
 
@@ -231,6 +234,8 @@ class Trainer:
         callbacks = list(callbacks)
         with make_progress("it", disable=not progress) as bar:
             task = bar.add_task("fit", total=self.total_steps, completed=self.step)
+            if self.plan is not None:
+                self.plan.start(self.step)
             try:
                 while self.step < self.total_steps:
                     if self.deadline is not None and time.perf_counter() >= self.deadline:
@@ -244,7 +249,9 @@ class Trainer:
                         run.after_step(self, logs)
                     for cb in callbacks:
                         cb(self, logs)
-                    bar.update(task, completed=self.step,
+                    if self.plan is not None:
+                        self.plan.after_step(self)
+                    bar.update(task, completed=self.step, total=self.total_steps,
                                info=f"loss {logs['loss/total']:.4g} inv_s {logs['inv_s']:.0f} "
                                f"lv {int(logs['levels'])}")
                     if not math.isfinite(logs["loss/total"]):
