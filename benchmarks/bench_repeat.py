@@ -9,7 +9,9 @@ Three checks on one dataset, each with the CLI in a fresh process:
   competing for the cores (a slower machine): is its schedule (learning rate and open grid
   levels, logged every step) the same?
 - ``budget``: a ``--minutes`` fit, then ``--iters`` with the step count its ``scene.yaml``
-  recorded: the same schedule, and (same threads) the same field?
+  recorded: the same schedule, and (same threads) the same field? A budgeted fit that ran
+  slower than its probe re-plans its length (``train.replan_at``; ``budget_replanned``), and
+  then only the length repeats, not the schedule step for step.
 
     python benchmarks/bench_repeat.py /tmp/hybridneus-bench/bunny-999v-346x260-t8
 """
@@ -25,6 +27,7 @@ from pathlib import Path
 
 import common
 import torch
+import yaml
 
 
 def fit(dataset: Path, out: Path, *args: str) -> Path:
@@ -69,14 +72,15 @@ def main() -> None:
             busy.kill()
         d = fit(args.dataset, tmp / "d", "--minutes", str(args.minutes), "--seed",
                 str(args.seed), *two)
-        steps = int(next(line.split(":")[1] for line in (d / "scene.yaml").read_text()
-                         .splitlines() if line.startswith("steps:")))
+        record = yaml.safe_load((d / "scene.yaml").read_text())
+        steps = int(record["steps"])
         e = fit(args.dataset, tmp / "e", "--iters", str(steps), "--seed", str(args.seed), *two)
         found = {
             "rerun_same_field": same_field(a, b),
             "slower_same_schedule": schedule(a) == schedule(c),
             "slower_same_field": same_field(a, c),
             "budget_steps": steps,
+            "budget_replanned": "re-planned" in record["steps_from"],
             # a budgeted fit that met its deadline early has a prefix of the schedule
             "budget_completed": len(schedule(d)) == len(schedule(e)),
             "budget_same_schedule": schedule(e)[:len(schedule(d))] == schedule(d),

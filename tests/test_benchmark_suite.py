@@ -386,3 +386,40 @@ def test_clean_up_steps_are_set_beside_the_default_mesh_of_the_same_fits():
     assert "| gen-cage-1 | 2 | 0.0100 | 0.0300 | 0.0200 | 0.0100 |" in text
     assert "bunny" not in text  # its line lacks one of the steps
     assert report.cleanup_section(lines[2:]) == []
+
+
+def test_curves_come_from_suite_lines_of_several_commits(tmp_path):
+    """benchmarks/curves.py: one curve per COMMIT:PRESET line, side by side, from the run's
+    metrics.csv; a spec without a line is refused by name."""
+    import pytest
+
+    sys.path.insert(0, str(SUITE.parent))
+    spec = importlib.util.spec_from_file_location("curves", SUITE.parent / "curves.py")
+    curves = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(curves)
+    lines = []
+    for i, commit in enumerate(("aaa1111", "bbb2222")):
+        run = tmp_path / f"run{i}"
+        run.mkdir()
+        rows = ["step,loss/total,loss/event,inv_s,opacity"]
+        rows += [f"{s},{1 / s},{0.5 / s},{20 * (1 + s) ** (2 + i)},0.8" for s in range(1, 60)]
+        (run / "metrics.csv").write_text("\n".join(rows) + "\n")
+        lines.append({"scene": "blob", "preset": "fast", "seed": 1, "commit": commit,
+                      "dirty": False, "date": "2026-01-01", "minutes": 15, "steps": 59,
+                      "total_steps": 59, "restores": i, "chamfer": 0.01 + i,
+                      "run": str(run)})
+    results = tmp_path / "suite.jsonl"
+    results.write_text("".join(json.dumps(r) + "\n" for r in lines))
+    out = tmp_path / "curves.png"
+    assert curves.main(["blob", "--seed", "1", "bbb2:fast", "aaa1:fast", "--results",
+                        str(results), "--out", str(out)]) == 0
+    import cv2
+
+    image = cv2.imread(str(out))
+    one = curves.figure(lines[:1])
+    assert image.shape[0] == one.shape[0] and image.shape[1] == 2 * one.shape[1]
+    assert "1 restores | Chamfer 1.0100" in curves.caption(lines[1])
+    with pytest.raises(SystemExit, match="no clean line of blob seed 1 with preset 'fast' at c"):
+        curves.pick(lines, "blob", 1, "c:fast")
+    with pytest.raises(SystemExit, match="expected COMMIT:PRESET"):
+        curves.pick(lines, "blob", 1, "fast")

@@ -10,7 +10,13 @@ from fitting import params, stop_at, tiny
 from hybridneus.api import fit, prepare
 from hybridneus.errors import ConfigError
 from hybridneus.training import losses as L
-from hybridneus.training.priors import CollapseGuard, CurvaturePrior, HullPrior, SharpnessFloor
+from hybridneus.training.priors import (
+    CollapseGuard,
+    CurvaturePrior,
+    HullPrior,
+    SharpnessCeiling,
+    SharpnessFloor,
+)
 from hybridneus.training.priors.curvature import surface_points
 from hybridneus.training.runs import load_checkpoint
 from hybridneus.training.schedules import sharpness_floor
@@ -23,13 +29,39 @@ def _prior(trainer, kind):
 
 def test_each_prior_has_one_switch(scene):
     every = prepare(scene, tiny("train.iters=1"), device="cpu")[0]
-    assert [p.name for p in every.priors] == ["hull", "curvature", "sharpness_floor",
-                                              "collapse_guard"]
-    off = [f"priors.{n}.enabled=false" for n in ("hull", "curvature", "sharpness_floor",
-                                                 "collapse_guard")]
+    names = ["hull", "curvature", "sharpness_floor", "sharpness_ceiling", "collapse_guard"]
+    assert [p.name for p in every.priors] == names
+    off = [f"priors.{n}.enabled=false" for n in names]
     assert prepare(scene, tiny("train.iters=1", *off), device="cpu")[0].priors == []
     paper = prepare(scene, tiny("train.iters=1", preset="eventneus"), device="cpu")[0]
     assert [p.name for p in paper.priors] == ["collapse_guard"]
+
+
+# --------------------------------------------------------------------------- sharpness ceiling
+
+
+def test_the_sharpness_ceiling_holds_a_runaway_sharpness_at_its_bound(scene):
+    """A sharpness far past the finest cell is brought down to per_cell / cell by the first
+    step, and stays there; without the prior it stays where it was (the field's own clamp
+    at 1e6 leaves it no gradient)."""
+    import math
+
+    def sharpness_after(*extra: str) -> tuple[float, object]:
+        trainer, _ = prepare(scene, tiny("train.iters=3", *extra), device="cpu")
+        with torch.no_grad():
+            trainer.field.variance.fill_(math.log(5e6) / 10.0)
+        trainer.fit(progress=False)
+        return float(trainer.field.inv_s()), trainer
+
+    capped, trainer = sharpness_after()
+    ceiling = _prior(trainer, SharpnessCeiling).ceiling
+    side = float((trainer.aabb[3:] - trainer.aabb[:3]).max())
+    assert ceiling == pytest.approx(4.0 * 64 / side)  # TINY's grid.max_resolution is 64
+    assert capped == pytest.approx(ceiling, rel=1e-4)
+    free, _ = sharpness_after("priors.sharpness_ceiling.enabled=false")
+    assert free == pytest.approx(1e6)
+    wider, _ = sharpness_after("priors.sharpness_ceiling.per_cell=8")
+    assert wider == pytest.approx(2 * ceiling, rel=1e-4)
 
 
 # --------------------------------------------------------------------------- curvature

@@ -34,6 +34,7 @@ from hybridneus.config.tree import (
     LossConfig,
     PriorsConfig,
     RenderConfig,
+    SharpnessCeiling,
     SharpnessFloor,
     TrainConfig,
     preset_config,
@@ -42,7 +43,8 @@ from hybridneus.config.tree import (
 __all__ = [
     "LEGACY_KEYS", "N_RAYS_BY_DEVICE", "PRESETS", "CollapseGuard", "Config", "CurvaturePrior",
     "DataConfig", "EstimateConfig", "FieldConfig", "GridConfig", "HullPrior", "LossConfig",
-    "PriorsConfig", "RenderConfig", "SharpnessFloor", "TrainConfig", "apply_overrides",
+    "PriorsConfig", "RenderConfig", "SharpnessCeiling", "SharpnessFloor", "TrainConfig",
+    "apply_overrides",
     "config_from_dict", "config_markdown", "config_table", "load_config", "preset_config",
     "rays_per_step", "save_config", "set_value", "validate",
 ]

@@ -65,6 +65,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("priors.curvature.step", lambda v: v > 0, "> 0"),
     ("priors.curvature.end", _fraction, "a fraction of training in [0, 1]"),
     ("priors.curvature.event_weight", lambda v: v >= 0, ">= 0"),
+    ("priors.sharpness_ceiling.per_cell", lambda v: v > 0, "> 0"),
     ("priors.sharpness_floor.at", lambda v: 0 < v <= 1, "a fraction of training in (0, 1]"),
     ("priors.sharpness_floor.delay", _fraction, "a fraction of training in [0, 1]"),
     ("priors.sharpness_floor.blend", _fraction, "a fraction of training in [0, 1]"),

@@ -220,6 +220,24 @@ class SharpnessFloor:
 
 
 @dataclass
+class SharpnessCeiling:
+    """An upper bound on the NeuS sharpness ``inv_s``, from the finest grid cell.
+
+    Assumes the surface cannot be placed more precisely than a fraction of the finest grid
+    cell (the crop box's longest side over ``grid.max_resolution``). Where the events favour
+    ever crisper edges, the learned sharpness can run away past that, and the sampler's
+    occupancy band (``render.occupancy_band / inv_s``) shrinks below the field's own error:
+    cells the surface crosses are skipped, rays miss the object and the field empties. Two of
+    116 benchmark fits ran away so (to 31,000 and 1,000,000) and failed; none of the others
+    ended above 890. Costs nothing; binds only a runaway. Switch it off to let the sharpness
+    grow freely (the paper's NeuS).
+    """
+
+    enabled: bool = True
+    per_cell: float = 4.0  # the bound is per_cell / (finest grid cell): about 2200 for fast
+
+
+@dataclass
 class CollapseGuard:
     """Bring back an earlier state when the field empties.
 
@@ -247,6 +265,7 @@ class PriorsConfig:
     hull: HullPrior = dataclasses.field(default_factory=HullPrior)
     curvature: CurvaturePrior = dataclasses.field(default_factory=CurvaturePrior)
     sharpness_floor: SharpnessFloor = dataclasses.field(default_factory=SharpnessFloor)
+    sharpness_ceiling: SharpnessCeiling = dataclasses.field(default_factory=SharpnessCeiling)
     collapse_guard: CollapseGuard = dataclasses.field(default_factory=CollapseGuard)
 
 
@@ -307,6 +326,7 @@ def _eventneus() -> Config:
     cfg.train.lr = 5e-4
     cfg.train.lr_variance = 1e-3
     cfg.priors.sharpness_floor.enabled = False  # the paper learns s freely
+    cfg.priors.sharpness_ceiling.enabled = False
     cfg.priors.hull.enabled = False  # the paper has no silhouette prior
     cfg.priors.curvature.enabled = False  # nor a smoothness prior
     cfg.train.warmup = 0.01

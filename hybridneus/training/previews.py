@@ -100,34 +100,56 @@ def write_preview(trainer, path: Path, view: int | None = None) -> None:
     _write_png(path, img)
 
 
-def write_curve(history: list[dict[str, float]], path: Path, size=(480, 240)) -> None:
-    """Training curves (log10 of loss/total and loss/event against step) as a PNG."""
+def _panel(img: np.ndarray, box: tuple[int, int, int, int],
+           series: list[tuple[str, tuple[int, int, int], np.ndarray, bool]],
+           bounds: tuple[float, float] | None = None) -> None:
+    """Draw ``(label, bgr, (n, 2) step/value, log10)`` series into ``box`` (x0, y0, x1, y1)
+    of ``img``, on one shared y range (``bounds``, else the data's)."""
+    x0b, y0b, x1b, y1b = box
+    cv2.rectangle(img, (x0b, y0b), (x1b, y1b), (180, 180, 180), 1)
+    drawn = [(k, c, np.column_stack([a[:, 0], np.log10(a[:, 1]) if lg else a[:, 1]]))
+             for k, c, a, lg in series if len(a) >= 2]
+    if not drawn:
+        return
+    steps = np.concatenate([d[2][:, 0] for d in drawn])
+    vals = np.concatenate([d[2][:, 1] for d in drawn])
+    sx0, sx1 = steps.min(), max(steps.max(), steps.min() + 1)
+    lo, hi = bounds if bounds is not None else (vals.min(), max(vals.max(), vals.min() + 1e-3))
+    for n, (key, colour, arr) in enumerate(drawn):
+        px = x0b + (arr[:, 0] - sx0) / (sx1 - sx0) * (x1b - x0b)
+        py = y1b - (np.clip(arr[:, 1], lo, hi) - lo) / (hi - lo) * (y1b - y0b)
+        poly = np.stack([px, py], axis=1).round().astype(np.int32)
+        cv2.polylines(img, [poly], False, colour, 1, cv2.LINE_AA)
+        cv2.putText(img, key, (x0b + 120 * n, y0b - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1)
+    cv2.putText(img, f"{hi:.2f}", (2, y0b + 8), cv2.FONT_HERSHEY_SIMPLEX, 0.3, (0, 0, 0), 1)
+    cv2.putText(img, f"{lo:.2f}", (2, y1b), cv2.FONT_HERSHEY_SIMPLEX, 0.3, (0, 0, 0), 1)
+
+
+def _points(history: list[dict[str, float]], key: str, positive: bool) -> np.ndarray:
+    pts = [(r["step"], r[key]) for r in history
+           if key in r and math.isfinite(r[key]) and (r[key] > 0 or not positive)]
+    return np.array(pts, dtype=np.float64).reshape(-1, 2)
+
+
+def write_curve(history: list[dict[str, float]], path: Path, size=(480, 400)) -> None:
+    """Training curves against step as a PNG: above, log10 of the losses; below, log10 of
+    the NeuS sharpness ``inv_s`` and the mean rendered opacity (0 to 1 on the same axis, so
+    that a sharpness running away or a field emptying shows at a glance)."""
     w, h = size
     img = np.full((h, w, 3), 255, np.uint8)
-    pad = 30
-    keys = [("loss/total", (0, 0, 0)), ("loss/event", (200, 60, 0)), ("loss/eikonal", (0, 140, 0)),
-            ("loss/rgb", (0, 60, 200))]
-    series = []
-    for key, colour in keys:
-        pts = [(r["step"], r[key]) for r in history if key in r and r[key] > 0]
-        if len(pts) >= 2:
-            series.append((key, colour, np.array(pts, dtype=np.float64)))
-    if series:
-        steps = np.concatenate([s[2][:, 0] for s in series])
-        vals = np.log10(np.concatenate([s[2][:, 1] for s in series]))
-        x0, x1 = steps.min(), max(steps.max(), steps.min() + 1)
-        y0, y1 = vals.min(), max(vals.max(), vals.min() + 1e-3)
-        for n, (key, colour, arr) in enumerate(series):
-            px = pad + (arr[:, 0] - x0) / (x1 - x0) * (w - 2 * pad)
-            py = h - pad - (np.log10(arr[:, 1]) - y0) / (y1 - y0) * (h - 2 * pad)
-            poly = np.stack([px, py], axis=1).round().astype(np.int32)
-            cv2.polylines(img, [poly], False, colour, 1, cv2.LINE_AA)
-            cv2.putText(img, key, (pad + 120 * n, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1)
-        cv2.putText(img, f"log10 {y1:.2f}", (2, pad), cv2.FONT_HERSHEY_SIMPLEX, 0.3, (0, 0, 0), 1)
-        cv2.putText(img, f"{y0:.2f}", (2, h - pad), cv2.FONT_HERSHEY_SIMPLEX, 0.3, (0, 0, 0), 1)
-        cv2.putText(img, f"step {int(x1)}", (w - 90, h - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
-                    (0, 0, 0), 1)
-    cv2.rectangle(img, (pad, pad), (w - pad, h - pad), (180, 180, 180), 1)
+    pad, mid = 30, int(h * 0.6)
+    losses = [("loss/total", (0, 0, 0)), ("loss/event", (200, 60, 0)),
+              ("loss/eikonal", (0, 140, 0)), ("loss/rgb", (0, 60, 200))]
+    _panel(img, (pad, pad, w - pad, mid - pad // 2),
+           [(k, c, _points(history, k, True), True) for k, c in losses])
+    cv2.putText(img, "log10", (2, pad + 20), cv2.FONT_HERSHEY_SIMPLEX, 0.3, (0, 0, 0), 1)
+    sharp = _points(history, "inv_s", True)
+    state = [("log10 inv_s", (160, 0, 160), sharp, True),
+             ("opacity x 6", (0, 120, 230), _points(history, "opacity", False) * [1, 6], False)]
+    _panel(img, (pad, mid + pad // 2, w - pad, h - pad), state, bounds=(0.0, 6.0))
+    last = int(max((r["step"] for r in history), default=0))
+    cv2.putText(img, f"step {last}", (w - 90, h - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
+                (0, 0, 0), 1)
     _write_png(path, img)
 
 

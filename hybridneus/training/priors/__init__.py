@@ -3,6 +3,7 @@
 - ``hull`` (:mod:`.hull`): a constant background, so the events' visual hull is free space;
 - ``curvature`` (:mod:`.curvature`): smooth surfaces where the events are silent;
 - ``sharpness_floor`` (:mod:`.sharpness`): a solid, opaque object;
+- ``sharpness_ceiling`` (:mod:`.sharpness`): a surface placed no finer than the grid's cells;
 - ``collapse_guard`` (:mod:`.collapse`): the object fills part of most views.
 
 :func:`build_priors` makes the enabled ones; the trainer calls their hooks
@@ -18,7 +19,7 @@ from hybridneus.training.priors.base import Prior, RandomPoints, StepContext
 from hybridneus.training.priors.collapse import CollapseGuard
 from hybridneus.training.priors.curvature import CurvaturePrior
 from hybridneus.training.priors.hull import HullPrior, free_space_of
-from hybridneus.training.priors.sharpness import SharpnessFloor
+from hybridneus.training.priors.sharpness import SharpnessCeiling, SharpnessFloor
 
 
 def build_priors(cfg: Config, field, split, aabb, device) -> list[Prior]:
@@ -41,10 +42,13 @@ def build_priors(cfg: Config, field, split, aabb, device) -> list[Prior]:
         out.append(CurvaturePrior(p.curvature))
     if p.sharpness_floor.enabled:
         out.append(SharpnessFloor(p.sharpness_floor, math.exp(10.0 * cfg.field.inv_s_init)))
+    if p.sharpness_ceiling.enabled:
+        side = float((aabb[3:] - aabb[:3]).max())
+        out.append(SharpnessCeiling(p.sharpness_ceiling, side / cfg.grid.max_resolution))
     if p.collapse_guard.enabled:
         out.append(CollapseGuard(p.collapse_guard, field))
     return out
 
 
 __all__ = ["CollapseGuard", "CurvaturePrior", "HullPrior", "Prior", "RandomPoints",
-           "SharpnessFloor", "StepContext", "build_priors"]
+           "SharpnessCeiling", "SharpnessFloor", "StepContext", "build_priors"]
