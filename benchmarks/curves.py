@@ -1,11 +1,12 @@
 """Training curves of suite fits side by side, for the docs: losses, sharpness and opacity.
 
 Like ``pictures.py``, a figure is made from suite result lines, never from loose runs: each
-``COMMIT:PRESET`` picks the newest clean line of the scene and seed at that commit, whose run
-folder holds the ``metrics.csv`` drawn (with ``hybridneus.training.previews.write_curve``),
-captioned with the line's commit, preset, budget, steps, restores and Chamfer.
+``COMMIT:PRESET`` picks the newest clean line of the scene and seed at that commit (as the
+lines spell it), whose run folder holds the ``metrics.csv`` drawn (with
+``hybridneus.training.previews.write_curve``), captioned with the line's commit, preset,
+budget, steps, restores and Chamfer.
 
-    python benchmarks/curves.py gen-blob-784857333 --seed 1 8257a30:fast 3f5b833:fast \\
+    python benchmarks/curves.py gen-blob-784857333 --seed 1 8257a30:fast 50fe3df:fast \\
         --out docs/images/gen-blob-784857333-sharpness.png
 """
 
@@ -20,10 +21,12 @@ from pathlib import Path
 import common
 import cv2
 import numpy as np
+import pictures
 
 
 def pick(lines: list[dict], scene: str, seed: int, spec: str) -> dict:
-    """The newest clean line of ``scene`` and ``seed`` for ``COMMIT:PRESET``.
+    """The newest clean line of ``scene`` and ``seed`` for ``COMMIT:PRESET``
+    (:func:`pictures.pick_lines`).
 
     Raises:
         SystemExit: the spec is malformed or no line matches.
@@ -31,13 +34,7 @@ def pick(lines: list[dict], scene: str, seed: int, spec: str) -> dict:
     commit, sep, preset = spec.partition(":")
     if not sep or not commit or not preset:
         raise SystemExit(f"curves: {spec!r}: expected COMMIT:PRESET")
-    found = [r for r in lines if r.get("scene") == scene and r.get("seed") == seed
-             and r.get("preset") == preset and not r.get("dirty")
-             and str(r.get("commit", "")).startswith(commit)]
-    if not found:
-        raise SystemExit(f"curves: no clean line of {scene} seed {seed} with preset {preset!r} "
-                         f"at {commit}")
-    return max(found, key=lambda r: r.get("date", ""))
+    return pictures.pick_lines(lines, scene, [preset], commit, seed)[0]
 
 
 def history(run: Path) -> list[dict[str, float]]:
@@ -51,8 +48,8 @@ def history(run: Path) -> list[dict[str, float]]:
 
 
 def caption(line: dict) -> str:
-    budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
-    return (f"{line['preset']} | {line['commit']} | {budget} | {line['steps']} of "
+    return (f"{line['preset']} | {line['commit']} | {pictures.budget_text(line)} | "
+            f"{line['steps']} of "
             f"{line['total_steps']} steps | {line.get('restores', 0)} restores | "
             f"Chamfer {line['chamfer']:.4f}")
 
@@ -85,10 +82,11 @@ def main(argv: list[str] | None = None) -> int:
     lines = [pick(common.read_lines(args.results), args.scene, args.seed, s)
              for s in args.specs]
     img = figure(lines)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_name(args.out.name + ".tmp.png")
-    cv2.imwrite(str(tmp), img)
-    tmp.replace(args.out)
+    from hybridneus.fileio import atomic_path
+
+    with atomic_path(args.out, suffix=".png") as tmp:
+        if not cv2.imwrite(str(tmp), img):
+            raise SystemExit(f"curves: {args.out}: could not write the PNG")
     print(f"curves: wrote {args.out}")
     return 0
 

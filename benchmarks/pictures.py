@@ -48,8 +48,13 @@ def pick_lines(lines: list[dict], scene: str, presets: list[str], commit: str | 
     return picked
 
 
+def budget_text(line: dict) -> str:
+    """A suite line's budget as captions write it: ``15 min`` or ``2000 steps``."""
+    return f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
+
+
 def caption(line: dict, ungrouped: bool = False) -> str:
-    budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
+    budget = budget_text(line)
     preset = line["preset"] + (", components judged alone" if ungrouped else "")
     cd = line["chamfer_ungrouped"] if ungrouped else line["chamfer"]
     return (f"{preset} | {line['commit']} | {budget} | seed {line['seed']} | "

@@ -411,7 +411,7 @@ def test_curves_come_from_suite_lines_of_several_commits(tmp_path):
     results = tmp_path / "suite.jsonl"
     results.write_text("".join(json.dumps(r) + "\n" for r in lines))
     out = tmp_path / "curves.png"
-    assert curves.main(["blob", "--seed", "1", "bbb2:fast", "aaa1:fast", "--results",
+    assert curves.main(["blob", "--seed", "1", "bbb2222:fast", "aaa1111:fast", "--results",
                         str(results), "--out", str(out)]) == 0
     import cv2
 

@@ -66,7 +66,6 @@ class SharpnessCeiling(Prior):
     name = "sharpness_ceiling"
 
     def __init__(self, cfg: CeilingConfig, cell: float) -> None:
-        self.cfg = cfg
         self.ceiling = cfg.per_cell / cell
 
     def after_update(self, trainer, p: float) -> None:
