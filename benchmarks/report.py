@@ -369,6 +369,7 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
                        f"| {r['commit']} | {_cpu(r)} | {r['date'][:10]} |")
         out += ["", f"Command: `{rows[-1]['command']}`", ""]
     for bench, title in (("repeat", "Repeatability"), ("step", "One training step"),
+                         ("trained_step", "A trained field's step"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
                          ("data", "Data"), ("simulate", "Simulation")):

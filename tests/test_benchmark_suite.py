@@ -423,3 +423,14 @@ def test_curves_come_from_suite_lines_of_several_commits(tmp_path):
         curves.pick(lines, "blob", 1, "c:fast")
     with pytest.raises(SystemExit, match="expected COMMIT:PRESET"):
         curves.pick(lines, "blob", 1, "fast")
+
+
+def test_a_trained_step_is_timed_on_a_copy_of_a_finished_run(tiny_scene):
+    sys.path.insert(0, str(SUITE.parent))
+    import bench_trained_step
+
+    run = next(p for p in (tiny_scene / "runs").iterdir() if (p / "checkpoints").is_dir())
+    before = sorted(str(p.relative_to(run)) for p in run.rglob("*"))
+    threads, seconds, share = bench_trained_step.step_seconds(run, 2, None)
+    assert threads >= 1 and 0 < seconds < 60 and 0.0 <= share < 0.01
+    assert sorted(str(p.relative_to(run)) for p in run.rglob("*")) == before  # run untouched

@@ -186,3 +186,40 @@ def test_colour_grid_needs_a_grid_encoding():
         HybridField(GridConfig(kind="frequency"), FieldConfig(color_grid_levels=4))
     with pytest.raises(ConfigError, match="color_grid_levels"):
         small_field(color_grid_levels=-1)
+
+
+def _subnormal_share(t: torch.Tensor) -> float:
+    a = t.detach().abs()
+    return float(((a > 0) & (a < torch.finfo(t.dtype).tiny)).float().mean())
+
+
+def test_flushed_softplus_matches_softplus_and_leaves_no_subnormals():
+    from hybridneus.model.eventneus import TAIL_CUTOFF, FlushedSoftplus
+
+    x = torch.linspace(-2.0, 0.5, 20001, dtype=torch.float64).requires_grad_(True)
+    ours, ref = FlushedSoftplus(100.0), torch.nn.Softplus(beta=100.0)
+    y, y_ref = ours(x), ref(x)
+    (g,) = torch.autograd.grad(y.sum(), x, create_graph=True)
+    (g_ref,) = torch.autograd.grad(y_ref.sum(), x, create_graph=True)
+    (h,) = torch.autograd.grad(g.sum(), x)
+    (h_ref,) = torch.autograd.grad(g_ref.sum(), x)
+    cut = x.detach() * 100.0 < -TAIL_CUTOFF
+    for mine, theirs in ((y, y_ref), (g, g_ref), (h, h_ref)):
+        assert torch.equal(mine.detach()[~cut], theirs.detach()[~cut])
+        assert torch.all(mine.detach()[cut] == 0)
+        assert float(theirs.detach()[cut].abs().max()) < 1e-11  # what the cut drops
+    # In float32 the plain Softplus's tail and its derivative are subnormal; ours are zeros.
+    x32 = torch.linspace(-2.0, 0.0, 4001).requires_grad_(True)
+    for act, expect_subnormals in ((ref, True), (ours, False)):
+        y = act(x32)
+        (g,) = torch.autograd.grad(y.sum() * 1e-3, x32)
+        found = _subnormal_share(y) + _subnormal_share(g)
+        assert (found > 0.01) == expect_subnormals, (act, found)
+
+
+def test_the_sdf_head_of_a_field_uses_the_flushed_softplus():
+    from hybridneus.model.eventneus import FlushedSoftplus
+
+    f = HybridField(GridConfig(n_levels=2, max_resolution=32), FieldConfig())
+    assert isinstance(f.sdf_net.activation, FlushedSoftplus)
+    assert f.sdf_net.activation.beta == FieldConfig().softplus_beta

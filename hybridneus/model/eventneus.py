@@ -13,7 +13,42 @@ import math
 from collections.abc import Sequence
 
 import torch
+import torch.nn.functional as F
 from torch import nn
+
+# Softplus, sigmoid and their derivatives fall below float32's smallest normal number (1.2e-38)
+# far out in their negative tails; x86 CPUs compute with such subnormal numbers many times
+# slower, and a trained SDF head was full of them (docs/training.md, "One training step"). Values
+# below exp(-TAIL_CUTOFF) = 9.4e-14 change no rendered quantity, so they are made exact zeros.
+TAIL_CUTOFF = 30.0
+
+
+class FlushedSoftplus(nn.Module):
+    """``Softplus(beta)`` that is exactly 0 where ``beta * x < -TAIL_CUTOFF``.
+
+    Elsewhere it equals :class:`torch.nn.Softplus` (threshold 20), and so do its first and
+    second derivatives; in the cut tail the true value is below ``9.4e-14 / beta``.
+
+    Args:
+        beta: sharpness.
+
+    Example:
+        >>> FlushedSoftplus(100.0)(torch.tensor([-1.0, 0.0])).tolist()
+        [0.0, 0.006931471638381481]
+    """
+
+    def __init__(self, beta: float = 1.0) -> None:
+        super().__init__()
+        self.beta = float(beta)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(...) -> (...)."""
+        low = -TAIL_CUTOFF / self.beta
+        # Clamping first keeps the subnormal tail out of softplus and its backward as well.
+        return F.softplus(x.clamp_min(low), self.beta) * (x > low)
+
+    def extra_repr(self) -> str:
+        return f"beta={self.beta}"
 
 
 class MLP(nn.Module):

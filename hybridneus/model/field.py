@@ -28,7 +28,7 @@ from torch import nn
 from hybridneus.config import FieldConfig, GridConfig
 from hybridneus.errors import ConfigError
 from hybridneus.model.crop import VOLUME_BOX, crop_sdf, grid_box
-from hybridneus.model.eventneus import geometric_init_, make_mlp
+from hybridneus.model.eventneus import FlushedSoftplus, geometric_init_, make_mlp
 from hybridneus.model.protocol import as_points
 
 
@@ -106,7 +106,7 @@ class HybridField(nn.Module):
             field.sdf_layers,
             1 + field.feature_dim,
             skips=field.sdf_skip,
-            activation=nn.Softplus(beta=field.softplus_beta),
+            activation=FlushedSoftplus(field.softplus_beta),
         )
         radius = min(field.init_radius, 0.9 * float(crop[0]))
         geometric_init_(self.sdf_net, n_inputs_xyz=3, radius=radius, skips=field.sdf_skip)
