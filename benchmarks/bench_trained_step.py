@@ -1,6 +1,6 @@
 """A trained field's training step at this commit and at another, in fresh processes,
-interleaved; with the share of the step's float32 results (the optimizer's aside) that are
-subnormal.
+interleaved; with the share of the step's float32 results (of its arithmetic: pointwise
+operations, matrix products and reductions) that are subnormal.
 
 x86 CPUs compute with subnormal floats (below 1.2e-38) many times slower than with normal
 ones. A fresh field (what ``bench_step.py`` and the budget's probe time) makes almost none; a
@@ -32,11 +32,16 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_flatten
 from hybridneus.api import prepare
 
+MATH = ("mm", "addmm", "bmm", "sum", "mean", "cumsum", "cumprod")
+
 class Watch(TorchDispatchMode):
     total = subnormal = 0
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         out = func(*args, **(kwargs or {}))
-        if "adam" in str(func):  # the optimizer's moments decay through the subnormals
+        # arithmetic only: views and empty buffers show whatever memory held, and the
+        # optimizer's moments decay through the subnormal range by design
+        name = func.__name__.split(".")[0]
+        if "adam" in name or (torch.Tag.pointwise not in func.tags and name not in MATH):
             return out
         for t in tree_flatten(out)[0]:
             if isinstance(t, torch.Tensor) and t.dtype == torch.float32 and t.numel():
