@@ -196,11 +196,22 @@ def test_alpha_far_inside_computes_no_subnormal_floats():
     sdf = torch.linspace(-1.0, 0.05, 2001).reshape(1, -1).requires_grad_(True)
     dot = torch.full_like(sdf, -0.5)
     deltas = torch.full_like(sdf, 0.01)
+    tiny = torch.finfo(torch.float32).tiny
     with _SubnormalWatch() as watch:
         alpha = alpha_from_sdf(sdf, dot, deltas, 2000.0)
         torch.autograd.grad(alpha.sum(), sdf)
         alpha_from_sdf_pairs(sdf + 0.0025, sdf - 0.0025, 2000.0)
     assert not watch.found
+    # A ray that meets opaque samples: its transmittance behind them, the weights and the
+    # gradients (which the colour network's backward multiplies) stop at exact zeros.
+    opaque = torch.cat([torch.zeros(1, 4), torch.full((1, 60), 0.999)], dim=1)
+    opaque.requires_grad_(True)
+    colour = torch.rand(1, 64, 3, requires_grad=True)
+    weights = weights_from_alpha(opaque)
+    grads = torch.autograd.grad(composite(weights, colour).sum(), (opaque, colour))
+    for t in (weights.detach(), *grads):
+        assert not bool(((t.abs() > 0) & (t.abs() < tiny)).any())
+    assert float(weights[0, 5].detach()) > 1e-4 and float(weights[0, -1].detach()) == 0.0
     with torch.no_grad():
         s64, d64 = sdf.double(), dot.double()
         prev = torch.sigmoid((s64 - d64 * 0.005) * 2000.0)

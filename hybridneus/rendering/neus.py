@@ -6,9 +6,13 @@ the interval ``[t_starts[i], t_ends[i]]`` with its point at the midpoint.
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from hybridneus.model.eventneus import TAIL_CUTOFF
+
+_FLOOR = math.exp(-TAIL_CUTOFF)
 
 
 def _cdf(sdf_times_s: torch.Tensor) -> torch.Tensor:
@@ -97,7 +101,10 @@ def transmittance_from_alpha(alpha: torch.Tensor) -> torch.Tensor:
         Differentiable.
     """
     ones = torch.ones_like(alpha[..., :1])
-    return torch.cumprod(torch.cat([ones, 1.0 - alpha + 1e-7], dim=-1), dim=-1)[..., :-1]
+    t = torch.cumprod(torch.cat([ones, 1.0 - alpha + 1e-7], dim=-1), dim=-1)[..., :-1]
+    # Behind an opaque surface the product falls by 1e-7 a sample into the subnormal floats,
+    # and the weights' gradients with it; below exp(-TAIL_CUTOFF) it is held at exact zero.
+    return t * (t > _FLOOR)
 
 
 def weights_from_alpha(alpha: torch.Tensor) -> torch.Tensor:
