@@ -24,10 +24,12 @@ TAIL_CUTOFF = 30.0
 
 
 class FlushedSoftplus(nn.Module):
-    """``Softplus(beta)`` that is exactly 0 where ``beta * x < -TAIL_CUTOFF``.
+    """``Softplus(beta)`` held at 0 where ``beta * x < -TAIL_CUTOFF``.
 
-    Elsewhere it equals :class:`torch.nn.Softplus` (threshold 20), and so do its first and
-    second derivatives; in the cut tail the true value is below ``9.4e-14 / beta``.
+    It is Softplus of ``x`` clamped there, less Softplus of the clamp point (``9.4e-14 /
+    beta``): the tail is 0 and stays out of the subnormal floats, forward and backward, and
+    elsewhere the value moves by that constant and the derivatives not at all. (One clamp and
+    one subtraction are cheaper than masking the tail: measured on the SDF head's shapes.)
 
     Args:
         beta: sharpness.
@@ -44,8 +46,7 @@ class FlushedSoftplus(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(...) -> (...)."""
         low = -TAIL_CUTOFF / self.beta
-        # Clamping first keeps the subnormal tail out of softplus and its backward as well.
-        return F.softplus(x.clamp_min(low), self.beta) * (x > low)
+        return F.softplus(x.clamp_min(low), self.beta) - F.softplus(x.new_full((), low), self.beta)
 
     def extra_repr(self) -> str:
         return f"beta={self.beta}"

@@ -11,18 +11,18 @@ not been probed. The step count is recorded in the run's ``scene.yaml``; ``--ite
 repeats the run's schedule on any machine.
 
 A fresh field is cheaper to step than a trained one (on a 2-core Intel Xeon, late steps of
-trained fields took 2 to 2.5 times the probe's time for the same number of samples; a
-profile puts most of it on subnormal floats in the trained networks), and a machine's speed
-drifts, so the probe alone overestimated a 15-minute fit's steps by 5-7% on an AMD EPYC and
-28-39% on that Xeon, and such fits stopped at their deadline with 72-78% of their schedule
-done: the learning rate never decayed and the late priors never faded. :class:`BudgetPlan`
-therefore re-plans at a few points of training (``train.replan_at``): it compares the
-wall-clock time the last stretch of steps took with what the probe predicted for them and,
-if the rest would overrun, shortens the schedule to what the time left allows at the
-measured pace. It only ever shortens: a schedule is not stretched past what the probe
-promised. Each re-plan is logged and recorded in ``scene.yaml``; ``--iters`` with the final
-count follows the re-planned schedule's length but not its jumps in progress, so it repeats
-such a run closely rather than exactly.
+trained fields took 2 to 2.5 times the probe's time for the same number of samples, most of
+it on subnormal floats, which the field and renderer now hold at zero: docs/training.md),
+and a machine's speed drifts, so the probe alone overestimated a 15-minute fit's steps by
+5-7% on an AMD EPYC and 28-39% on that Xeon, and such fits stopped at their deadline with
+72-78% of their schedule done: the learning rate never decayed and the late priors never
+faded. :class:`BudgetPlan` therefore re-plans at a few points of training
+(``train.replan_at``): it compares the wall-clock time the last stretch of steps took with
+what the probe predicted for them and, if the rest would overrun, shortens the schedule to
+what the time left allows at the measured pace. It only ever shortens: a schedule is not
+stretched past what the probe promised. Each re-plan is logged and recorded in
+``scene.yaml``; ``--iters`` with the final count follows the re-planned schedule's length
+but not its jumps in progress, so it repeats such a run closely rather than exactly.
 """
 
 from __future__ import annotations
