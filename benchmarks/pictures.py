@@ -10,6 +10,8 @@ ran the fits.
 
     python benchmarks/pictures.py gen-cage-56731231 --commit 3bc7531 \\
         --presets fast "fast priors.hull.enabled=false" --out docs/images/cage.png
+    python benchmarks/pictures.py gen-slab-384259586 --commit bcf44df 75609bd --seed 2 \\
+        --presets fast --out docs/images/slab-before-after.png
 
 ``--ungrouped`` puts the same field's mesh with the floater filter judging each component
 alone (the clean-up before ``component_gap``; the line's ``chamfer_ungrouped``) above each
@@ -121,7 +123,9 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("scene", help="scene name as in the lines (e.g. gen-cage-56731231)")
     ap.add_argument("--presets", nargs="+", required=True, help="one block per preset")
-    ap.add_argument("--commit", help="only lines of this commit (default: the newest)")
+    ap.add_argument("--commit", nargs="+", default=[None],
+                    help="only lines of this commit (default: the newest); several: a block "
+                    "per commit and preset, commits first (a before and after)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--results", type=Path, default=common.RESULTS / "suite.jsonl")
     ap.add_argument("--vmax", type=float, default=0.02, help="distance drawn in full red")
@@ -135,8 +139,9 @@ def main(argv: list[str] | None = None) -> int:
 
     from hybridneus.fileio import atomic_path
 
-    lines = pick_lines(common.read_lines(args.results), args.scene, args.presets, args.commit,
-                       args.seed)
+    results = common.read_lines(args.results)
+    lines = [line for commit in args.commit
+             for line in pick_lines(results, args.scene, args.presets, commit, args.seed)]
     image = picture(lines, args.vmax, args.size, args.ungrouped)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(args.out, suffix=".png") as tmp:

@@ -194,7 +194,10 @@ def _fix_budget(trainer, logger, end: float) -> None:
     trainer.record.steps_from = how
     trainer.deadline = end - save - 0.5
     if t.replan_at:
-        trainer.plan = BudgetPlan(costs, trainer.deadline, tuple(t.replan_at))
+        g = trainer.cfg.grid
+        opened = g.frequency_anneal_at if g.kind == "frequency" else g.levels_full_at
+        trainer.plan = BudgetPlan(costs, trainer.deadline, tuple(t.replan_at),
+                                  lengthen_after=opened if t.replan_lengthen else None)
 
 
 def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequence[str], dev):

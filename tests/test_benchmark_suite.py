@@ -336,6 +336,14 @@ def test_pictures_come_from_suite_lines(tmp_path):
     thick, exact = image[:single.shape[0]], image[single.shape[0]:]
     red = lambda im: int(((im[..., 0] > 150) & (im[..., 2] < 80)).sum())  # noqa: E731
     assert red(thick) > red(exact)
+    # several commits: a block per commit (a before and after of one preset)
+    older = dict(lines[1], commit="def5678", run=lines[0]["run"], date="2026-01-03")
+    results.write_text("".join(json.dumps(r) + "\n" for r in [*lines, older]))
+    assert pictures.main(["slab", "--presets", "fast+x=1", "--commit", "def5678", "abc1234",
+                          "--results", str(results), "--size", "64", "--out", str(out)]) == 0
+    image = np.asarray(Image.open(out))
+    assert image.shape[0] == 2 * single.shape[0]
+    assert red(image[:single.shape[0]]) > red(image[single.shape[0]:])
     with pytest.raises(SystemExit, match="no clean line of slab seed 0 with preset 'quality'"):
         pictures.pick_lines(lines, "slab", ["quality"], None, 0)
     # --ungrouped: the same field's mesh with components judged alone, above the default's

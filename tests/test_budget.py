@@ -39,7 +39,8 @@ class _Clock:
         return self.now
 
 
-def _budgeted_run(pace: float, at: tuple[float, ...]) -> tuple[object, bool, BudgetPlan]:
+def _budgeted_run(pace: float, at: tuple[float, ...], lengthen_after: float | None = None
+                  ) -> tuple[object, bool, BudgetPlan]:
     """Steps that each take ``pace`` times what the probe predicted for them, on a planned
     1000-step schedule whose probe said it fills 100 s exactly; runs to the schedule's end or
     the deadline. Returns (trainer, whether it ended by the deadline, plan)."""
@@ -51,13 +52,18 @@ def _budgeted_run(pace: float, at: tuple[float, ...]) -> tuple[object, bool, Bud
     trainer = SimpleNamespace(step=0, total_steps=total,
                               record=SimpleNamespace(steps=total, steps_from="budget"))
     clock = _Clock()
-    plan = BudgetPlan(costs, end, at, clock=clock)
+    plan = BudgetPlan(costs, end, at, lengthen_after=lengthen_after, clock=clock)
     plan.start(0)
+    plan.progress_after = []  # the progress of each re-plan's step in its new schedule
     while trainer.step < trainer.total_steps and clock.now < end:
         p = trainer.step / trainer.total_steps
         clock.now += pace * costs.mean(p, p + 1.0 / trainer.total_steps)
         trainer.step += 1
+        before = trainer.total_steps
         plan.after_step(trainer)
+        if trainer.total_steps != before:
+            plan.progress_after.append(trainer.step / trainer.total_steps)
+    plan.used = clock.now / end
     return trainer, clock.now <= end, plan
 
 
@@ -76,6 +82,23 @@ def test_a_plan_shortens_an_overrunning_schedule_so_that_it_ends_in_time():
 def test_a_plan_never_lengthens_a_schedule():
     trainer, _, plan = _budgeted_run(0.7, at=(0.05, 0.15, 0.3, 0.5, 0.7))
     assert trainer.total_steps == 1000 and not plan.replans
+    assert plan.used < 0.75  # a quarter of the budget left unused
+
+
+def test_a_plan_told_to_lengthen_does_so_only_past_the_open_levels_and_ends_in_time():
+    """At 0.7x the probe's step time, train.replan_lengthen lets the plan use the time it
+    gains, but only at points where the step stays past 40% (all levels open) of the longer
+    schedule; the fit still ends in time."""
+    trainer, in_time, plan = _budgeted_run(0.7, at=(0.05, 0.15, 0.3, 0.5, 0.7),
+                                           lengthen_after=0.4)
+    assert in_time and trainer.step == trainer.total_steps > 1100
+    assert plan.replans and all(p >= 0.4 for p in plan.progress_after)
+    assert "re-planned at step 5" in plan.replans[0]  # not at 5, 15 or 30%: levels not open
+    assert plan.used > 0.85
+    # lengthening is bounded by the levels' point, so 0.0 would allow any length; a slow
+    # fit is shortened as before
+    slow, in_time, _ = _budgeted_run(1.3, at=(0.05, 0.15, 0.3, 0.5, 0.7), lengthen_after=0.4)
+    assert in_time and slow.step == slow.total_steps < 1000
 
 
 def test_a_budgeted_fit_slower_than_its_probe_is_replanned_and_finishes(scene, tmp_path,

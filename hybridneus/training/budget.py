@@ -19,10 +19,11 @@ and a machine's speed drifts, so the probe alone overestimated a 15-minute fit's
 faded. :class:`BudgetPlan` therefore re-plans at a few points of training
 (``train.replan_at``): it compares the wall-clock time the last stretch of steps took with
 what the probe predicted for them and, if the rest would overrun, shortens the schedule to
-what the time left allows at the measured pace. It only ever shortens: a schedule is not
-stretched past what the probe promised. Each re-plan is logged and recorded in
-``scene.yaml``; ``--iters`` with the final count follows the re-planned schedule's length
-but not its jumps in progress, so it repeats such a run closely rather than exactly.
+what the time left allows at the measured pace. Unless ``train.replan_lengthen`` is set
+(:class:`BudgetPlan`'s ``lengthen_after``), it only shortens. Each re-plan is logged and
+recorded in ``scene.yaml``; ``--iters`` with the final count follows the re-planned
+schedule's length but not its jumps in progress, so it repeats such a run closely rather
+than exactly.
 """
 
 from __future__ import annotations
@@ -137,13 +138,20 @@ class StepCosts:
 
 @dataclass
 class BudgetPlan:
-    """Shortens a budgeted fit's schedule when its steps run slower than the probe said.
+    """Shortens a budgeted fit's schedule when its steps run slower than the probe said (and,
+    with ``lengthen_after``, lengthens it when they run faster).
 
     Call :meth:`after_step` after every step; at each progress point of ``at`` (fractions of
     the schedule) it measures the seconds the steps since the previous point took against
     the ``costs`` predicted for them and, when the remaining steps at that ratio would end
     after ``end`` (a ``clock()`` value), sets the trainer's ``total_steps`` (and its scene
     record's ``steps``) to what fits.
+
+    A longer schedule moves the progress of the current step back. ``lengthen_after`` (a
+    fraction, or None: never lengthen) allows it only where the step stays past that fraction
+    of the longer schedule: given the point where coarse-to-fine has opened every grid level,
+    no level closes again; what moves back is the learning rate's decay and the fading priors,
+    by the step's share of the added length.
 
     Attributes:
         replans: one line per re-plan that changed the schedule.
@@ -152,6 +160,7 @@ class BudgetPlan:
     costs: StepCosts
     end: float
     at: tuple[float, ...]
+    lengthen_after: float | None = None
     clock: Callable[[], float] = time.perf_counter
     replans: list[str] = field(default_factory=list)
     _mark: tuple[int, float] | None = None
@@ -182,7 +191,15 @@ class BudgetPlan:
         left = self.end - now
         rest = self.costs.mean(p) * pace * HEADROOM
         fits = trainer.step + max(1, int(left / rest)) if left > 0 else trainer.step + 1
-        if fits >= total:
+        if fits > total:
+            if self.lengthen_after is None:
+                return
+            if self.lengthen_after > 0:
+                # the longest schedule whose progress at this step stays past lengthen_after
+                fits = min(fits, int(trainer.step / self.lengthen_after))
+            if fits <= total:
+                return
+        elif fits == total:
             return
         line = (f"re-planned at step {trainer.step}: {total} -> {fits} steps (the last "
                 f"{done} took {pace:.2f}x the probe's time)")
