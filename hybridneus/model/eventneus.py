@@ -18,17 +18,21 @@ from torch import nn
 
 # Softplus, sigmoid and their derivatives fall below float32's smallest normal number (1.2e-38)
 # far out in their negative tails; x86 CPUs compute with such subnormal numbers many times
-# slower, and a trained SDF head was full of them (docs/training.md, "One training step"). Values
-# below exp(-TAIL_CUTOFF) = 9.4e-14 change no rendered quantity, so they are made exact zeros.
-TAIL_CUTOFF = 30.0
+# slower, and a trained SDF head was full of them (docs/training.md, "One training step").
+# Tails below exp(-TAIL_CUTOFF) = 8.8e-27 are held at 0. The cut lies that far out because
+# Adam with eps 1e-15 turns gradients down to about 1e-17 into sizeable steps: what it drops
+# is at most 8.8e-27 times its upstream gradient, which no Adam step can see; at exp(-30) a
+# dead unit's last gradient (1e-13 times upstream) was cut as well.
+TAIL_CUTOFF = 60.0
 
 
 class FlushedSoftplus(nn.Module):
     """``Softplus(beta)`` held at 0 where ``beta * x < -TAIL_CUTOFF``.
 
-    It is Softplus of ``x`` clamped there, less Softplus of the clamp point (``9.4e-14 /
-    beta``): the tail is 0 and stays out of the subnormal floats, forward and backward, and
-    elsewhere the value moves by that constant and the derivatives not at all. (One clamp and
+    It is Softplus of ``x`` clamped there, less Softplus of the clamp point (``8.8e-27 /
+    beta``): the tail is 0, which keeps subnormal floats out of the matrix products that
+    follow, forward and backward; elsewhere the value moves by that constant and the
+    derivatives not at all. (One clamp and
     one subtraction are cheaper than masking the tail: measured on the SDF head's shapes.)
 
     Args:

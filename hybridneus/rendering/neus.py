@@ -17,8 +17,7 @@ _FLOOR = math.exp(-TAIL_CUTOFF)
 
 def _cdf(sdf_times_s: torch.Tensor) -> torch.Tensor:
     """``sigmoid``, with its tail below ``exp(-TAIL_CUTOFF)`` held there: far inside a
-    surface the true value and its derivative are subnormal floats, slow on x86 CPUs, and
-    below the ``1e-5`` that :func:`alpha_from_sdf` adds anyway."""
+    surface the true value and its derivative are subnormal floats, slow on x86 CPUs."""
     return torch.sigmoid(sdf_times_s.clamp_min(-TAIL_CUTOFF))
 
 
