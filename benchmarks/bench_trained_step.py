@@ -126,5 +126,6 @@ def measure(run: Path, args: argparse.Namespace, site: Path | None) -> None:
     print("  ".join(f"{key}: {value}" for key, value in found.items()), flush=True)
     common.append(args.out, {"bench": "trained_step", **found, **common.stamp(threads)})
 
+
 if __name__ == "__main__":
     main()

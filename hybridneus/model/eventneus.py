@@ -32,8 +32,8 @@ class FlushedSoftplus(nn.Module):
     It is Softplus of ``x`` clamped there, less Softplus of the clamp point (``8.8e-27 /
     beta``): the tail is 0, which keeps subnormal floats out of the matrix products that
     follow, forward and backward; elsewhere the value moves by that constant and the
-    derivatives not at all. (One clamp and
-    one subtraction are cheaper than masking the tail: measured on the SDF head's shapes.)
+    derivatives not at all. (One clamp and one subtraction cost less than masking the tail
+    with a comparison and a product.)
 
     Args:
         beta: sharpness.
