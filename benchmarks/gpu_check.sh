@@ -45,7 +45,8 @@ $PY -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_av
 echo "commit $HYBRIDNEUS_BENCH_COMMIT"
 
 echo "== 1. fits of $MINUTES minutes"
-scenes=$(for d in "$CARRY"/*/; do basename "$d" | sed -E 's/-[0-9]+v-[0-9]+x[0-9]+-t[0-9]+$//'; done)
+# Only dataset folders (test-scenes/ beside them holds the tests' small scenes).
+scenes=$(for d in "$CARRY"/*/; do [ -f "$d/scene.json" ] && basename "$d" | sed -E 's/-[0-9]+v-[0-9]+x[0-9]+-t[0-9]+$//'; done)
 timeout 400 $PY benchmarks/run_suite.py --assets /nonexistent --cache "$CARRY" \
     --out-runs "$RUNS" --scenes $scenes --minutes "$MINUTES" --curve 2 \
     --presets fast --device "$DEVICE" --threads 2 --fit-only
@@ -63,7 +64,7 @@ echo "== 2. pytest -m gpu"
 HYBRIDNEUS_TEST_SCENES=$PWD/$CARRY/test-scenes timeout 90 $PY -m pytest -q -m gpu -p no:cacheprovider tests/test_grids.py \
     tests/test_data_windows.py tests/test_training.py 2>&1 | tail -5
 
-first=$(ls -d "$CARRY"/*/ | head -1)
+first=$(dirname "$(ls "$CARRY"/*/scene.json | head -1)")
 echo "== 3. bench_launches on $first"
 timeout 75 $PY benchmarks/bench_launches.py --cache "$first" --device "$DEVICE" --steps 30 \
     --out "$OUT/gpu.jsonl"
