@@ -209,26 +209,29 @@ def _silhouettes(
 
 
 def project_to_pixels(
-    split: SplitData, view: int, points: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pixel (column, row) indices of world ``points`` (n, 3) in ``view``, and whether each
-    is in front of the camera; the inverse of :func:`hybridneus.data.rays.camera_rays`
-    (its radial model is inverted by fixed-point iteration)."""
-    c2w = split.c2w[view]
+    split: SplitData, view: int, points: torch.Tensor | np.ndarray
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Pixel (column, row) indices (long) of world ``points`` (n, 3) in ``view``, and whether
+    each is in front of the camera (bool), computed in ``points``' dtype on its device; the
+    inverse of :func:`hybridneus.data.rays.camera_rays` (its radial model is inverted by
+    fixed-point iteration)."""
+    points = torch.as_tensor(points)
+    c2w = torch.as_tensor(split.c2w[view], dtype=points.dtype, device=points.device)
     cam = (points - c2w[:3, 3]) @ c2w[:3, :3]
     z = cam[:, 2]
-    xn = cam[:, :2] / np.where(np.abs(z) < 1e-9, 1e-9, z)[:, None]
+    xn = cam[:, :2] / torch.where(z.abs() < 1e-9, 1e-9, z)[:, None]
     k1, k2 = (float(v) for v in split.distortion[view])
     if k1 or k2:  # rays divide distorted coordinates by 1 + k1 r^2 + k2 r^4
-        xd = xn.copy()
+        xd = xn.clone()
         for _ in range(8):
-            r2 = (xd**2).sum(axis=1, keepdims=True)
+            r2 = (xd * xd).sum(dim=1, keepdim=True)
             xd = xn * (1.0 + k1 * r2 + k2 * r2 * r2)
         xn = xd
-    K = split.intrinsics[view]
-    u = K[0, 0] * xn[:, 0] + K[0, 1] * xn[:, 1] + K[0, 2] - 0.5
-    v = K[1, 1] * xn[:, 1] + K[1, 2] - 0.5
-    return np.floor(u + 0.5).astype(np.int64), np.floor(v + 0.5).astype(np.int64), z > 0
+    fx, s, cx = (float(k) for k in split.intrinsics[view][0, :3])
+    fy, cy = float(split.intrinsics[view][1, 1]), float(split.intrinsics[view][1, 2])
+    u = fx * xn[:, 0] + s * xn[:, 1] + cx - 0.5
+    v = fy * xn[:, 1] + cy - 0.5
+    return torch.floor(u + 0.5).long(), torch.floor(v + 0.5).long(), z > 0
 
 
 def event_hull(
@@ -243,6 +246,7 @@ def event_hull(
     min_votes: float = 0.05,
     denoise: bool = True,
     silhouettes: tuple[list[int], list[np.ndarray]] | None = None,
+    device: torch.device | str = "cpu",
 ) -> EventHull:
     """The visual hull of the event silhouettes on a grid over the box [lo, hi] with
     ``resolution`` points along its longest side. A point is free when at least ``min_votes``
@@ -251,22 +255,29 @@ def event_hull(
     images), or when it is farther from the origin than the nearest camera (the object is
     inside the ring). ``denoise``: see :func:`event_silhouettes`. ``silhouettes``: (view
     indices, masks) to use instead of :func:`event_silhouettes`'s (``window``, ``dilate``,
-    ``step`` and ``denoise`` are then unused)."""
+    ``step`` and ``denoise`` are then unused). ``device``: where the votes are counted (in
+    float32: the silhouettes' dilation is far wider than its rounding)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     voxel = float((hi - lo).max()) / (resolution - 1)
     shape = tuple(int(np.ceil((hi - lo)[k] / voxel - 1e-9)) + 1 for k in range(3))
     axes = [lo[k] + voxel * np.arange(shape[k]) for k in range(3)]
     points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    n_out = np.zeros(points.shape[0], dtype=np.int32)
-    n_seen = np.zeros(points.shape[0], dtype=np.int32)
     if silhouettes is None:
         silhouettes = event_silhouettes(split, window, dilate, step, denoise)
     views, masks = silhouettes
+    # torch, not numpy: a 96^3 grid against 160 views is 10 s of single-threaded numpy at
+    # the start of every fit, a fraction of that on two threads in float32, and nothing on a GPU
+    grid = torch.as_tensor(points, dtype=torch.float32, device=device)
+    n_out = torch.zeros(grid.shape[0], dtype=torch.int32, device=device)
+    n_seen = torch.zeros_like(n_out)
+    w, h = split.width, split.height
     for view, mask in zip(views, masks, strict=True):
-        u, v, front = project_to_pixels(split, view, points)
-        seen = front & (u >= 0) & (u < split.width) & (v >= 0) & (v < split.height)
+        u, v, front = project_to_pixels(split, view, grid)
+        seen = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        inside = torch.tensor(mask, device=device)[v.clamp(0, h - 1), u.clamp(0, w - 1)]
         n_seen += seen
-        n_out[seen] += ~mask[v[seen], u[seen]]
+        n_out += seen & ~inside
+    n_out, n_seen = n_out.cpu().numpy(), n_seen.cpu().numpy()
     # one view whose outline is incomplete (a pause, a low-contrast edge) must not carve the
     # object: free space needs the votes of a share of the views that see the point
     free = n_out >= np.maximum(1, min_votes * n_seen)
@@ -367,7 +378,7 @@ def event_free_space(
     """The free space of the event hull (:func:`event_hull`, about 160 views, the crop's
     votes) over the box [lo, hi]; ``None`` when no view outlines anything."""
     step = hull_view_step(split) if step is None else step
-    hull = event_hull(split, lo, hi, resolution, step=step)
+    hull = event_hull(split, lo, hi, resolution, step=step, device=device)
     if hull.n_views == 0 or not hull.occupied.any():
         return None
     return FreeSpace(hull, grow, device)
