@@ -99,9 +99,7 @@ def main() -> None:
     if args.against:
         import compare_commits
 
-        args.against = subprocess.run(["git", "-C", str(common.REPO), "rev-parse", "--short",
-                                       args.against], capture_output=True, text=True,
-                                      check=True).stdout.strip()
+        args.against = common.short_commit(args.against)
         site = compare_commits.worktree(args.against)[1]
     for run in args.runs:
         measure(run, args, site)

@@ -32,6 +32,16 @@ CODE = ("hybridneus", "grids", "cli", "benchmarks", ":(exclude)benchmarks/result
 COMMIT_VARIABLE = "HYBRIDNEUS_BENCH_COMMIT"
 
 
+def short_commit(name: str) -> str:
+    """The short hash of the commit ``name`` (a hash, a tag, ``HEAD~2``) in this repository;
+    a one-line exit when git does not know it."""
+    out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--verify", "--short",
+                          f"{name}^{{commit}}"], capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"error: {name}: not a commit of {REPO}")
+    return out.stdout.strip()
+
+
 @functools.cache
 def git_state() -> tuple[str, bool]:
     """(short HEAD, whether the code has uncommitted changes), read once per process: a commit

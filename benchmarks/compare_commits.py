@@ -96,10 +96,7 @@ def main() -> None:
     ap.add_argument("--out-runs", type=Path, default=WORK / "runs")
     common.add_arguments(ap, "suite")
     args = ap.parse_args()
-    resolve = ["git", "-C", str(common.REPO), "rev-parse", "--short"]
-    args.base, args.new = (subprocess.run([*resolve, c], capture_output=True, text=True,
-                                          check=True).stdout.strip()
-                           for c in (args.base, args.new))
+    args.base, args.new = (common.short_commit(c) for c in (args.base, args.new))
     assets = run_suite.find_assets(args.assets)
     sources = list(assets) if args.scenes is None else [s for s in args.scenes if s != "none"]
     if args.generated:

@@ -118,6 +118,21 @@ def test_a_dirty_tree_is_refused_unless_told(monkeypatch):
     common.check_tree(argparse.Namespace(allow_dirty=True))
 
 
+def test_commits_to_compare_are_named_by_git_or_refused_in_one_line():
+    import pytest
+
+    sys.path.insert(0, str(SUITE.parent))
+    import common
+
+    head = subprocess.run(["git", "-C", str(common.REPO), "rev-parse", "--short", "HEAD"],
+                          capture_output=True, text=True)
+    if head.returncode != 0:
+        pytest.skip("not a git checkout")
+    assert common.short_commit("HEAD") == head.stdout.strip()
+    with pytest.raises(SystemExit, match="no-such-commit: not a commit"):
+        common.short_commit("no-such-commit")
+
+
 def test_the_report_pairs_two_commits_and_leaves_dirty_lines_out(tmp_path, monkeypatch):
     sys.path.insert(0, str(SUITE.parent))
     import common
