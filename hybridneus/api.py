@@ -194,8 +194,7 @@ def _fix_budget(trainer, logger, end: float) -> None:
     trainer.record.steps_from = how
     trainer.deadline = end - save - 0.5
     if t.replan_at:
-        g = trainer.cfg.grid
-        opened = g.frequency_anneal_at if g.kind == "frequency" else g.levels_full_at
+        opened = trainer.cfg.grid.opened_at
         trainer.plan = BudgetPlan(costs, trainer.deadline, tuple(t.replan_at),
                                   lengthen_after=opened if t.replan_lengthen else None)
 

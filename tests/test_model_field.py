@@ -122,6 +122,20 @@ def test_level_schedule_opens_levels_over_training():
     assert f.active_levels() == 4
 
 
+def test_coarse_to_fine_opens_everything_where_the_grid_config_says():
+    grid = GridConfig(levels_full_at=0.3, frequency_anneal_at=0.7)
+    assert grid.opened_at == 0.3
+    grid.kind = "frequency"
+    assert grid.opened_at == 0.7
+    f = small_field()
+    f.grid_config.start_levels = 1
+    f.grid_config.levels_full_at = 0.3
+    f.update_step(29, 100)
+    assert f.active_levels() < f.grid_config.n_levels
+    f.update_step(30, 100)
+    assert f.active_levels() == f.grid_config.n_levels
+
+
 def test_eventneus_preset_builds_the_paper_network():
     cfg = preset_config("eventneus")
     torch.manual_seed(0)

@@ -28,6 +28,12 @@ class GridConfig:
     domain: str = "volume"  # grid span: crop (a cube around the crop box) or volume ([-1, 1]^3)
     domain_margin: float = 0.3  # domain=crop: cube half-side = (1 + this) x the box's largest half
 
+    @property
+    def opened_at(self) -> float:
+        """The fraction of training at which coarse-to-fine has opened everything: every
+        grid level, or for kind=frequency every band."""
+        return self.frequency_anneal_at if self.kind == "frequency" else self.levels_full_at
+
 
 @dataclass
 class FieldConfig:

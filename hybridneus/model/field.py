@@ -176,15 +176,15 @@ class HybridField(nn.Module):
         """Apply the coarse-to-fine schedule for ``step`` of ``total_steps``.
 
         Grid kinds open levels linearly from ``grid.start_levels`` to all at
-        ``grid.levels_full_at * total_steps``; the frequency kind anneals its bands over
-        ``grid.frequency_anneal_at * total_steps``.
+        ``grid.opened_at * total_steps``; the frequency kind anneals its bands over as many
+        steps.
         """
         g = self.grid_config
         if g.kind == "frequency":
-            self.encoding.n_anneal = max(1, int(g.frequency_anneal_at * total_steps))
+            self.encoding.n_anneal = max(1, int(g.opened_at * total_steps))
             self.encoding.update_step(step)
             return
-        full_at = max(1.0, g.levels_full_at * total_steps)
+        full_at = max(1.0, g.opened_at * total_steps)
         extra = (g.n_levels - g.start_levels) * min(1.0, step / full_at)
         self.encoding.set_active_levels(int(g.start_levels + math.floor(extra)))
 

@@ -85,7 +85,7 @@ def step_seconds(trainer) -> tuple[float, float, float, float]:
 
 
 def _full_at(trainer) -> float:
-    return min(max(trainer.cfg.grid.levels_full_at, 0.0), LATE)
+    return min(max(trainer.cfg.grid.opened_at, 0.0), LATE)
 
 
 def mean_step_seconds(first: float, full: float, late: float, refresh: float, full_at: float,
