@@ -66,6 +66,29 @@ def test_the_sharpness_ceiling_holds_a_runaway_sharpness_at_its_bound(scene):
     assert 0.85 * 2 * ceiling < wider <= 2 * ceiling * (1 + 1e-5)
 
 
+def test_a_ceiling_that_follows_the_levels_bounds_by_the_finest_open_one(scene):
+    """With priors.sharpness_ceiling.follow_levels, three of TINY's six levels open (8 -> 64)
+    scale the bound by the third level's resolution over the sixth's, and the runaway is held
+    there; with every level open the bound is the plain ceiling."""
+    import math
+
+    cfg = tiny("train.iters=300", "priors.sharpness_ceiling.follow_levels=true")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    with torch.no_grad():
+        trainer.field.variance.fill_(math.log(5e6) / 10.0)
+    trainer.fit([stop_at(3)], progress=False)
+    assert trainer.step == 3
+    prior = _prior(trainer, SharpnessCeiling)
+    assert trainer.field.active_levels() == 3
+    b = (64 / 8) ** (1 / 5)
+    held = prior.bound(trainer.field)
+    assert held == pytest.approx(prior.ceiling * 8 * b**2 / 64)
+    assert 0.85 * held < float(trainer.field.inv_s()) <= held * (1 + 1e-5)
+    trainer.field.update_step(300, 300)
+    assert trainer.field.active_levels() == 6
+    assert prior.bound(trainer.field) == pytest.approx(prior.ceiling)
+
+
 # --------------------------------------------------------------------------- curvature
 
 

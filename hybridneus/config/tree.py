@@ -238,10 +238,16 @@ class SharpnessCeiling:
     116 benchmark fits ran away so (to 31,000 and 1,000,000) and failed; none of the others
     ended above 890. Costs nothing; binds only a runaway. Switch it off to let the sharpness
     grow freely (the paper's NeuS).
+
+    ``follow_levels``: while coarse-to-fine has opened only the coarse levels, the finest
+    cell the field can use is theirs, many times the finest level's; the bound then scales
+    with the finest active level's resolution (about 210 with five of ``fast``'s 16 levels
+    open instead of 2,700), so an early runaway is held where the open grid places a surface.
     """
 
     enabled: bool = True
     per_cell: float = 4.0  # the bound is per_cell / (finest grid cell): about 2200 for fast
+    follow_levels: bool = False  # the finest *active* level's cell while coarse-to-fine opens
 
 
 @dataclass
