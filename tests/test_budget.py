@@ -39,11 +39,12 @@ class _Clock:
         return self.now
 
 
-def _budgeted_run(pace: float, at: tuple[float, ...], lengthen_after: float | None = None
+def _budgeted_run(pace, at: tuple[float, ...], lengthen_after: float | None = None
                   ) -> tuple[object, bool, BudgetPlan]:
-    """Steps that each take ``pace`` times what the probe predicted for them, on a planned
-    1000-step schedule whose probe said it fills 100 s exactly; runs to the schedule's end or
-    the deadline. Returns (trainer, whether it ended by the deadline, plan)."""
+    """Steps that each take ``pace`` times what the probe predicted for them (a number, or a
+    function of the step's index), on a planned 1000-step schedule whose probe said it fills
+    100 s exactly; runs to the schedule's end or the deadline. Returns (trainer, whether it
+    ended by the deadline, plan)."""
     from types import SimpleNamespace
 
     costs = StepCosts(0.05, 0.12, 0.1, 0.2, 0.3, 16)
@@ -57,7 +58,8 @@ def _budgeted_run(pace: float, at: tuple[float, ...], lengthen_after: float | No
     plan.progress_after = []  # the progress of each re-plan's step in its new schedule
     while trainer.step < trainer.total_steps and clock.now < end:
         p = trainer.step / trainer.total_steps
-        clock.now += pace * costs.mean(p, p + 1.0 / trainer.total_steps)
+        factor = pace(trainer.step) if callable(pace) else pace
+        clock.now += factor * costs.mean(p, p + 1.0 / trainer.total_steps)
         trainer.step += 1
         before = trainer.total_steps
         plan.after_step(trainer)
@@ -77,6 +79,21 @@ def test_a_plan_shortens_an_overrunning_schedule_so_that_it_ends_in_time():
     assert 700 <= trainer.total_steps < 1000 and trainer.record.steps == trainer.total_steps
     assert plan.replans and "re-planned at step" in trainer.record.steps_from
     assert "1.30x the probe's time" in plan.replans[0]
+
+
+def test_a_plan_that_shortens_past_its_next_point_does_not_replan_on_one_step():
+    """A machine three times slower from step 300 on: at 50% (step 486 of 972) the plan
+    shortens the schedule to 521 steps, which puts the step past the 70% point too.
+    Re-planning at the next step would time that step alone; that one step being slow (a
+    checkpoint, say) would cut the schedule again and leave budget unused."""
+    def pace(index: int) -> float:  # index 486 is step 487, the one after the re-plan
+        return 6.0 if index == 486 else 3.0 if index >= 300 else 1.0
+
+    trainer, in_time, plan = _budgeted_run(pace, at=(0.05, 0.15, 0.3, 0.5, 0.7))
+    assert in_time and trainer.step == trainer.total_steps == 521
+    assert [line.split(":")[0] for line in plan.replans] == [
+        "re-planned at step 50", "re-planned at step 486"]
+    assert plan.used > 0.95
 
 
 def test_a_plan_never_lengthens_a_schedule():

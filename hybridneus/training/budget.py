@@ -204,6 +204,11 @@ class BudgetPlan:
         line = (f"re-planned at step {trainer.step}: {total} -> {fits} steps (the last "
                 f"{done} took {pace:.2f}x the probe's time)")
         trainer.total_steps = trainer.record.steps = fits
+        # A shorter schedule can put this step past the next points too; re-planning at the
+        # next step would time that one step alone (an occupancy refresh, a checkpoint, a
+        # hiccup), so those points are spent here.
+        while self._next < len(self.at) and trainer.step / fits >= self.at[self._next]:
+            self._next += 1
         trainer.record.steps_from += f"; {line}"
         self.replans.append(line)
         logging.getLogger("hybridneus").info(line)
