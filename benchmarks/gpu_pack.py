@@ -91,9 +91,12 @@ def main() -> None:
         runs = unpack(args.unpack, args.out)
         print(f"{merge_lines(args.unpack)} lines added to {common.RESULTS}")
         if runs:
-            subprocess.run([sys.executable, str(Path(__file__).with_name("run_suite.py")),
-                            "--score-runs", *map(str, runs), "--cache", str(args.cache)],
-                           check=True)
+            score = [sys.executable, str(Path(__file__).with_name("run_suite.py")),
+                     "--score-runs", *map(str, runs), "--cache", str(args.cache)]
+            if subprocess.run(score).returncode != 0:
+                # run_suite has said why (a dirty tree, say); the runs stay for a second try
+                raise SystemExit(f"error: {args.out}: runs unpacked but not scored; score them "
+                                 f"with: {' '.join(score[1:])}")
         return
     commit, dirty = common.git_state()
     if dirty:
