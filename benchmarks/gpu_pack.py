@@ -96,7 +96,7 @@ def main() -> None:
             if subprocess.run(score).returncode != 0:
                 # run_suite has said why (a dirty tree, say); the runs stay for a second try
                 raise SystemExit(f"error: {args.out}: runs unpacked but not scored; score them "
-                                 f"with: {' '.join(score[1:])}")
+                                 f"with: python {' '.join(score[1:])}")
         return
     commit, dirty = common.git_state()
     if dirty:
