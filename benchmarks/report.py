@@ -370,6 +370,7 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
         out += ["", f"Command: `{rows[-1]['command']}`", ""]
     for bench, title in (("repeat", "Repeatability"), ("step", "One training step"),
                          ("trained_step", "A trained field's step"),
+                         ("early", "The first steps of a fit"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
                          ("data", "Data"), ("simulate", "Simulation")):

@@ -457,3 +457,18 @@ def test_a_trained_step_is_timed_on_a_copy_of_a_finished_run(tiny_scene):
     threads, seconds, share = bench_trained_step.step_seconds(run, 2, None)
     assert threads >= 1 and 0 < seconds < 60 and 0.0 <= share < 0.01
     assert sorted(str(p.relative_to(run)) for p in run.rglob("*")) == before  # run untouched
+
+
+def test_the_opening_of_a_fit_is_recorded_per_seed(tiny_scene, tmp_path):
+    out = tmp_path / "early.jsonl"
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_early.py")),
+                           str(tiny_scene / "device"),
+                           "--seeds", "0", "1", "--steps", "3", "--iters", "40", "--variants", "",
+                           "priors.collapse_guard.enabled=false", "--allow-dirty", "--out",
+                           str(out)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [line["variant"] for line in lines] == ["fast", "priors.collapse_guard.enabled=false"]
+    for line in lines:
+        assert line["seeds"] == 2 and len(line["restores"]) == 2 and line["steps"] == 3
+        assert all(0.0 <= o <= 1.0 for o in line["occupied"])
