@@ -378,12 +378,16 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
         for r in results.get(bench, []):
             by_machine[_cpu(r)].append(r)
         for cpu, rows in by_machine.items():
-            # the latest run on each machine: the lines of its command and commit
+            # the latest run on each machine: the lines of its command and commit (of the
+            # first steps, whose runs each take one dataset, every command of that commit)
             last = rows[-1]
-            rows = [r for r in rows if (r["commit"], r["command"]) == (last["commit"],
-                                                                       last["command"])]
+            rows = [r for r in rows if r["commit"] == last["commit"]
+                    and (bench == "early" or r["command"] == last["command"])]
+            commands = list(dict.fromkeys(r["command"] for r in rows))
             out += [f"### {title}: {cpu}, commit {last['commit']}, {last['date'][:10]}", "",
-                    *_table(rows), "", f"Command: `{last['command']}`", ""]
+                    *_table(rows), "",
+                    *(f"Command: `{c}`" + ("  " if i < len(commands) - 1 else "")
+                      for i, c in enumerate(commands)), ""]
     return out
 
 
