@@ -5,9 +5,10 @@ collapse guard, but the fit that follows is another fit: on the generated cage, 
 of one seed scored 0.032 to 0.133 with zero to two such restores. This runs the first
 ``--steps`` steps of an ``--iters`` schedule (the early phase of a 15-minute fit on a 2-core
 CPU, coarse-to-fine still at its first levels) for several seeds and config variants, and
-writes one line per variant: per seed the restores, the lowest 25-step mean opacity, and the
-sharpness and the marked share of the occupancy grid at the last step. A fixed ``--iters``
-schedule on a CPU is deterministic, so each seed's line repeats.
+writes one line per variant: per seed the restores, the lowest mean opacity over the collapse
+guard's window (25 steps), and the sharpness and the marked share of the occupancy grid at
+the last step. A fixed ``--iters`` schedule on a CPU is deterministic, so each seed's line
+repeats.
 
     python benchmarks/bench_early.py /tmp/hybridneus-bench/gen-cage-56731231-999v-346x260-t8 \\
         --seeds 0 1 2 3 4 5 --variants "" priors.hull.enabled=false
@@ -21,10 +22,6 @@ from collections import deque
 from pathlib import Path
 
 import common
-import torch
-
-#: Steps averaged for the opacity, as the collapse guard's default window.
-WINDOW = 25
 
 
 def opening(dataset: Path, seed: int, steps: int, iters: int, overrides: list[str],
@@ -36,13 +33,15 @@ def opening(dataset: Path, seed: int, steps: int, iters: int, overrides: list[st
     cfg = apply_overrides(preset_config("fast"), [
         f"train.iters={iters}", f"train.seed={seed}", f"train.threads={threads}",
         "train.preview_every=0", *overrides])
-    window: deque[float] = deque(maxlen=WINDOW)
+    # the opacity averaged as the collapse guard averages it
+    width = cfg.priors.collapse_guard.window
+    window: deque[float] = deque(maxlen=width)
     seen = {"lowest": float("inf")}
 
     def record(trainer, logs) -> None:
         window.append(logs["opacity"])
-        if len(window) == WINDOW:
-            seen["lowest"] = min(seen["lowest"], sum(window) / WINDOW)
+        if len(window) == width:
+            seen["lowest"] = min(seen["lowest"], sum(window) / width)
         seen.update(restores=int(logs.get("restores", 0)), inv_s=logs["inv_s"],
                     occupied=logs["occupied"])
         if trainer.step >= steps:
@@ -71,7 +70,6 @@ def main() -> None:
     common.check_tree(args)
     if not (args.dataset / "scene.json").is_file():
         raise SystemExit(f"error: {args.dataset}: no scene.json (not a dataset folder)")
-    torch.set_num_threads(args.threads)
     for variant in args.variants:
         overrides = [o for o in variant.split("+") if o]
         runs = [opening(args.dataset, s, args.steps, args.iters, overrides, args.threads)

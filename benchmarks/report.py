@@ -383,11 +383,9 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             last = rows[-1]
             rows = [r for r in rows if r["commit"] == last["commit"]
                     and (bench == "early" or r["command"] == last["command"])]
-            commands = list(dict.fromkeys(r["command"] for r in rows))
+            commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
             out += [f"### {title}: {cpu}, commit {last['commit']}, {last['date'][:10]}", "",
-                    *_table(rows), "",
-                    *(f"Command: `{c}`" + ("  " if i < len(commands) - 1 else "")
-                      for i, c in enumerate(commands)), ""]
+                    *_table(rows), "", "  \n".join(commands), ""]
     return out
 
 
