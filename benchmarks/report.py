@@ -255,8 +255,9 @@ def variant_section(lines: list[dict]) -> list[str]:
         for r in rows:
             fits[(r["preset"], r["scene"])][r["seed"]] = r
         names = [v[len(base):].strip(" +") for v in variants]
+        hows = list(dict.fromkeys(_how(r) for r in rows))  # the table holds every one's fits
         out += [f"### `{base}` and its variants, {budget}, commit {commit}, {cpu}", "",
-                f"Command: `{rows[-1].get('fit_command') or rows[-1]['command']}`", "",
+                ("Command: " if len(hows) == 1 else "Commands: ") + "; ".join(hows), "",
                 f"| scene | seeds | CD `{base}` | range | "
                 + " | ".join(f"`{n}`" for n in names) + " |",
                 "|---|---|---|---|" + "---|" * len(names)]

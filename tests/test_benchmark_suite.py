@@ -252,6 +252,11 @@ def test_variants_are_set_beside_their_preset_on_the_same_seeds():
     assert "def5678" not in text
     assert "def5678" in "\n".join(report.suite_section(lines))
     assert "priors.hull" not in "\n".join(report.suite_section(lines))
+    # a table of two suite calls (one per seed) names both
+    lines += [{**line("fast", "slab", 5, 0.09), "command": "run_suite.py --seeds 5"},
+              {**line(spec, "slab", 5, 0.03), "command": "run_suite.py --seeds 5"}]
+    text = "\n".join(report.variant_section(lines))
+    assert "Commands: `run_suite.py`; `run_suite.py --seeds 5`" in text
 
 
 def test_the_kinds_with_few_events_get_their_own_mean():
