@@ -88,6 +88,32 @@ def test_the_generated_set_is_drawn_from_its_seed():
     assert suite.scene_name("bunny") == "bunny"
 
 
+def test_floor_meshes_leave_out_exactly_the_unseen_part():
+    _suite_module()
+    import bench_floor
+
+    from hybridneus.evaluation.inside import inside_mask
+    from hybridneus.simulate.generated import concatenate_parts, generated_parts, generated_scene
+
+    parts = generated_parts("slab", 7)
+    assert len(parts) == 2  # body, plate
+    whole = concatenate_parts(parts)
+    assert np.array_equal(whole.vertices, generated_scene("slab", 7).vertices)
+    slab = bench_floor.ideal_meshes("slab", 7)
+    body, plate = (p.to_trimesh() for p in parts)
+    centre = plate.bounds.mean(axis=0) * np.array([1, 0, 1]) + body.bounds.mean(axis=0) * [0, 1, 0]
+    edge = np.array([body.bounds[0, 0] + 1e-3, centre[1], centre[2]])
+    assert inside_mask(slab["ring"], np.stack([centre, edge])).tolist() == [False, True]
+    assert inside_mask(slab["body"], centre[None]).tolist() == [True]
+    cage_parts = generated_parts("cage", 7)
+    cage = bench_floor.ideal_meshes("cage", 7)
+    rings = [p for p in cage_parts if np.ptp(p.vertices[:, 1]) < 0.05]
+    assert 2 <= len(rings) <= 3  # the cage draws 2 or 3 rings
+    kept = sum(len(p.faces) for p in cage_parts) - sum(len(p.faces) for p in rings)
+    assert len(cage["no rings"].faces) == kept
+    assert len(cage["body"].faces) == len(cage_parts[0].faces)
+
+
 def test_preset_specs_name_a_preset_and_its_overrides():
     _suite_module()
     import suite_jobs

@@ -226,16 +226,26 @@ _BUILDERS = {"box": _box_object, "slab": _slab_object, "cage": _cage_object,
              "bowl": _bowl_object, "blob": _blob_object, "rods": _rods_object}
 
 
-def generated_scene(kind: str, seed: int) -> SceneMesh:
-    """The object of ``kind`` drawn by ``seed`` (any size: the simulator normalises it).
+def generated_parts(kind: str, seed: int) -> list[SceneMesh]:
+    """The parts of :func:`generated_scene`'s object, in the order its builder makes them
+    (the slab's body before its plate; the cage's body, then its wires, then its rings), in
+    the builder's own units (before the simulator normalises the object).
 
     Raises:
         MeshError: unknown kind.
     """
     if kind not in _BUILDERS:
         raise MeshError(f"{PREFIX}{kind}: unknown kind; choose one of {', '.join(KINDS)}")
-    parts = _BUILDERS[kind](_rng(kind, seed))
-    return concatenate_parts(parts, source=f"{PREFIX}{kind}:{seed}")
+    return _BUILDERS[kind](_rng(kind, seed))
+
+
+def generated_scene(kind: str, seed: int) -> SceneMesh:
+    """The object of ``kind`` drawn by ``seed`` (any size: the simulator normalises it).
+
+    Raises:
+        MeshError: unknown kind.
+    """
+    return concatenate_parts(generated_parts(kind, seed), source=f"{PREFIX}{kind}:{seed}")
 
 
 def generated_conditions(kind: str, seed: int) -> tuple[float, Shading]:
