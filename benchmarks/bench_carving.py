@@ -120,7 +120,9 @@ def main() -> None:
             f"step {r['step']} held {r['held']:.2f} extra {r['extra']:.3f}" for r in rows))
         common.append(args.out, {
             "bench": "carving", "dataset": args.dataset.name, "variant": variant or "fast",
-            "seed": args.seed, "iters": args.iters, "steps": rows,
+            "seed": args.seed, "iters": args.iters,
+            **{key: [r[key] for r in rows] for key in ("step", "held", "extra", "inv_s",
+                                                        "restores")},
             **common.stamp(args.threads)})
         gap = [np.full((pictures[0].shape[0], 6), 128, np.uint8)]
         strips.append(np.concatenate(sum(([p] + gap for p in pictures), [])[:-1], 1))

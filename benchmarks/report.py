@@ -372,6 +372,8 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
     for bench, title in (("repeat", "Repeatability"), ("step", "One training step"),
                          ("trained_step", "A trained field's step"),
                          ("early", "The first steps of a fit"),
+                         ("carving", "What a fit's opening holds of the solid"),
+                         ("floor", "Chamfer floors: ideal meshes that lack an unseen part"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
                          ("data", "Data"), ("simulate", "Simulation")):
@@ -380,10 +382,11 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             by_machine[_cpu(r)].append(r)
         for cpu, rows in by_machine.items():
             # the latest run on each machine: the lines of its command and commit (of the
-            # first steps, whose runs each take one dataset, every command of that commit)
+            # first steps and the carving, whose runs each take one dataset, every command
+            # of that commit)
             last = rows[-1]
             rows = [r for r in rows if r["commit"] == last["commit"]
-                    and (bench == "early" or r["command"] == last["command"])]
+                    and (bench in ("early", "carving") or r["command"] == last["command"])]
             commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
             out += [f"### {title}: {cpu}, commit {last['commit']}, {last['date'][:10]}", "",
                     *_table(rows), "", "  \n".join(commands), ""]

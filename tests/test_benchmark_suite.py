@@ -503,3 +503,22 @@ def test_the_opening_of_a_fit_is_recorded_per_seed(tiny_scene, tmp_path):
     for line in lines:
         assert line["seeds"] == 2 and len(line["restores"]) == 2 and line["steps"] == 3
         assert all(0.0 <= o <= 1.0 for o in line["occupied"])
+
+
+def test_the_carving_of_a_fit_is_recorded_with_its_slices(tiny_scene, tmp_path):
+    out, image = tmp_path / "carving.jsonl", tmp_path / "carving.png"
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_carving.py")),
+                           str(tiny_scene / "device"), "--at", "2", "4", "--iters", "40",
+                           "--variants", "", "priors.hull.enabled=false", "--image", str(image),
+                           "--allow-dirty", "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [line["variant"] for line in lines] == ["fast", "priors.hull.enabled=false"]
+    for line in lines:
+        assert line["step"] == [2, 4]
+        assert all(0.0 <= v <= 1.0 for v in line["held"] + line["extra"])
+    from PIL import Image
+
+    # per variant a strip of two steps, each two 160-pixel slices with 4- and 6-pixel rules
+    assert Image.open(image).size == (2 * 160 + 6, 2 * (2 * 160 + 4 + 10))
