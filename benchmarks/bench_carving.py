@@ -18,7 +18,6 @@ the ground truth's solid in light grey, the field's inside in black.
 from __future__ import annotations
 
 import argparse
-import tempfile
 from pathlib import Path
 
 import common
@@ -49,9 +48,8 @@ def opening(dataset: Path, seed: int, at: list[int], iters: int, overrides: list
     """Run the opening of a ``fast`` fit; per step in ``at`` what it held, and its slices."""
     import torch
     import trimesh
+    from bench_early import opening_config, run_opening
 
-    from hybridneus.api import fit
-    from hybridneus.config import apply_overrides, preset_config
     from hybridneus.evaluation.inside import inside_mask
 
     gt = trimesh.load(dataset / "gt_mesh.ply", force="mesh")
@@ -62,9 +60,6 @@ def opening(dataset: Path, seed: int, at: list[int], iters: int, overrides: list
     solid = inside_mask(gt, probe)
     planes = _slices(lo, hi)
     plane_solid = [inside_mask(gt, p.reshape(-1, 3)).reshape(p.shape[:2]) for p in planes]
-    cfg = apply_overrides(preset_config("fast"), [
-        f"train.iters={iters}", f"train.seed={seed}", f"train.threads={threads}",
-        "train.preview_every=0", *overrides])
     rows, pictures = [], []
 
     def record(trainer, logs) -> None:
@@ -85,11 +80,8 @@ def opening(dataset: Path, seed: int, at: list[int], iters: int, overrides: list
                 img[mask.reshape(gt_in.shape)] = 0
                 column += [img, np.full((4, img.shape[1]), 128, np.uint8)]
             pictures.append(np.concatenate(column[:-1], 0))
-        if trainer.step >= max(at):
-            raise KeyboardInterrupt  # as Ctrl-C: the fit saves and returns
 
-    with tempfile.TemporaryDirectory() as tmp:
-        fit(dataset, cfg, [record], out=tmp, device="cpu")
+    run_opening(dataset, opening_config(seed, iters, threads, overrides), max(at), record)
     return rows, pictures
 
 

@@ -24,15 +24,33 @@ from pathlib import Path
 import common
 
 
+def opening_config(seed: int, iters: int, threads: int, overrides: list[str]):
+    """The ``fast`` config of an ``iters``-step schedule with ``overrides``, without previews."""
+    from hybridneus.config import apply_overrides, preset_config
+
+    return apply_overrides(preset_config("fast"), [
+        f"train.iters={iters}", f"train.seed={seed}", f"train.threads={threads}",
+        "train.preview_every=0", *overrides])
+
+
+def run_opening(dataset: Path, cfg, steps: int, record) -> None:
+    """Fit ``dataset`` with ``cfg`` into a throw-away folder, calling ``record(trainer, logs)``
+    after every step, and stop after step ``steps``."""
+    from hybridneus.api import fit
+
+    def step(trainer, logs) -> None:
+        record(trainer, logs)
+        if trainer.step >= steps:
+            raise KeyboardInterrupt  # as Ctrl-C: the fit saves and returns
+
+    with tempfile.TemporaryDirectory() as tmp:
+        fit(dataset, cfg, [step], out=tmp, device="cpu")
+
+
 def opening(dataset: Path, seed: int, steps: int, iters: int, overrides: list[str],
             threads: int) -> dict:
     """The first ``steps`` steps of a ``fast`` fit of ``iters`` steps; what they did."""
-    from hybridneus.api import fit
-    from hybridneus.config import apply_overrides, preset_config
-
-    cfg = apply_overrides(preset_config("fast"), [
-        f"train.iters={iters}", f"train.seed={seed}", f"train.threads={threads}",
-        "train.preview_every=0", *overrides])
+    cfg = opening_config(seed, iters, threads, overrides)
     # the opacity averaged as the collapse guard averages it
     width = cfg.priors.collapse_guard.window
     window: deque[float] = deque(maxlen=width)
@@ -44,11 +62,8 @@ def opening(dataset: Path, seed: int, steps: int, iters: int, overrides: list[st
             seen["lowest"] = min(seen["lowest"], sum(window) / width)
         seen.update(restores=int(logs.get("restores", 0)), inv_s=logs["inv_s"],
                     occupied=logs["occupied"])
-        if trainer.step >= steps:
-            raise KeyboardInterrupt  # as Ctrl-C: the fit saves and returns
 
-    with tempfile.TemporaryDirectory() as tmp:
-        fit(dataset, cfg, [record], out=tmp, device="cpu")
+    run_opening(dataset, cfg, steps, record)
     lowest = seen["lowest"]  # None: fewer steps than one window
     return {"seed": seed, "restores": seen["restores"],
             "lowest_opacity": round(lowest, 4) if lowest != float("inf") else None,

@@ -24,15 +24,6 @@ import common
 import numpy as np
 
 
-def _box(lo, hi):
-    import trimesh
-
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    box = trimesh.creation.box(extents=hi - lo)
-    box.apply_translation((lo + hi) / 2)
-    return box
-
-
 def ideal_meshes(kind: str, seed: int) -> dict:
     """Named ideal meshes (trimesh, in the generator's units) for ``kind`` and ``seed``."""
     import trimesh
@@ -46,9 +37,9 @@ def ideal_meshes(kind: str, seed: int) -> dict:
         (x0, y0, z0), (x1, y1, z1) = body.bounds
         (px0, _, pz0), (px1, _, pz1) = plate.bounds
         out["body"] = body
-        out["ring"] = trimesh.util.concatenate([
-            _box((x0, y0, z0), (x1, y1, pz0)), _box((x0, y0, pz1), (x1, y1, z1)),
-            _box((x0, y0, pz0), (px0, y1, pz1)), _box((px1, y0, pz0), (x1, y1, pz1))])
+        out["ring"] = trimesh.util.concatenate([trimesh.creation.box(bounds=b) for b in (
+            ((x0, y0, z0), (x1, y1, pz0)), ((x0, y0, pz1), (x1, y1, z1)),
+            ((x0, y0, pz0), (px0, y1, pz1)), ((px1, y0, pz0), (x1, y1, pz1)))])
     elif kind == "cage":
         # rings lie flat: as wide as the cage along x and z, a wire's thickness along y
         upright = [p for p in parts
@@ -75,10 +66,13 @@ def main() -> None:
     for folder in args.datasets:
         try:
             scene = json.loads((folder / "scene.json").read_text())
-        except (OSError, ValueError) as e:
-            raise SystemExit(f"error: {folder / 'scene.json'}: {e}") from None
-        kind, seed = parse_source(scene.get("source_mesh", ""))
-        tf = scene["transform"]
+            kind, seed = parse_source(scene.get("source_mesh", ""))
+            tf = scene["transform"]
+        except (OSError, ValueError, KeyError) as e:  # MeshError is a ValueError
+            raise SystemExit(f"error: {folder / 'scene.json'}: not a simulated generated "
+                             f"object ({e})") from None
+        if not (folder / "gt_mesh.ply").is_file():
+            raise SystemExit(f"error: {folder}: no gt_mesh.ply")
         gt = trimesh.load(folder / "gt_mesh.ply", force="mesh")
         for name, mesh in ideal_meshes(kind, seed).items():
             mesh.apply_scale(tf["scale"])
