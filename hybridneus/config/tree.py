@@ -109,7 +109,9 @@ class TrainConfig:
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
-    warmup: float = 0.005  # fraction of training over which the learning rate warms up
+    # A tenth: warmed up over 0.005, fields emptied or ran away in sharpness while only the
+    # coarse levels were open (docs/accuracy.md, "A longer warm-up").
+    warmup: float = 0.1  # fraction of training over which the learning rate warms up
     decay_start: float = 0.5  # fraction of training after which the lr decays exponentially
     decay_final: float = 0.1  # lr multiplier reached at the last step
     seed: int = 0  # seeds torch, the ray jitter and the event-window sampler
