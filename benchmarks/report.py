@@ -459,14 +459,17 @@ def main() -> None:
                     help="also write README.md's results table from COMMIT's suite lines")
     args = ap.parse_args()
     if args.readme:
-        readme = README.read_text()
-        start = readme.index(README_START) + len(README_START)
-        end = readme.index(" ", start)
-        readme = readme[:start] + args.readme + readme[end:]
+        current = README.read_text()
+        start = current.index(README_START) + len(README_START)
+        end = current.index(" ", start)
         suite = [r for r in common.read_lines(common.RESULTS / "suite.jsonl")
                  if not r.get("dirty")]
-        README.write_text(readme_text(readme, suite))
-        print(f"wrote {README}'s results for {args.readme}")
+        readme = readme_text(current[:start] + args.readme + current[end:], suite)
+        if args.check and readme != current:
+            raise SystemExit(f"{README}: results out of date; rerun the report")
+        if not args.check:
+            README.write_text(readme)
+            print(f"wrote {README}'s results for {args.readme}")
     text = build([tuple(c) for c in args.compare])
     if args.check:
         same = args.out.is_file() and args.out.read_text() == text
