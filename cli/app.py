@@ -27,6 +27,7 @@ _COMMANDS: list[tuple[str, str, str]] = [
     ("fit", "fit", "fit"),
     ("preview", "preview", "preview"),
     ("simulate", "simulate", "simulate"),
+    ("convert", "convert", "convert"),
     ("mesh", "mesh", "mesh"),
     ("eval", "evaluate", "evaluate"),
     ("render", "render", "render"),

@@ -61,9 +61,13 @@ def dataset_report(ds, cfg) -> dict[str, Any]:
             "distortion": (np.median(s.distortion, axis=0).round(6).tolist()
                            if s.distortion.any() else None),
         }
+    from hybridneus.recordings.frame import read_scene_frame
+
+    frame = read_scene_frame(ds.root)
     out: dict[str, Any] = {"dataset": str(ds.root), "preset_source": ds.preset_source,
                            "preset": ds.preset.to_dict(), "stated": sorted(ds.stated),
-                           "splits": splits, "notes": list(ds.notes)}
+                           "splits": splits, "notes": list(ds.notes),
+                           "frame": frame.to_json() if frame is not None else None}
     if cfg.data.split in ds.splits:
         found = estimate_scene(ds, cfg.estimate, cfg.data)
         noise, balance = found.noise, found.balance
@@ -135,6 +139,10 @@ def _print(report: dict[str, Any]) -> None:
         if s["distortion"]:
             k1, k2 = s["distortion"][:2]
             say(f"{name}: radial distortion k1={k1:.4g}, k2={k2:.4g}")
+    if report.get("frame"):
+        f = report["frame"]
+        say(f"frame: a converted recording, {f['scale']:.4g} normalised units per metre "
+            f"(centre: {f['how']}); meshes are written back in the recording's frame")
     for note in report["notes"]:
         if "polarity stored as" not in note:  # already shown per split above
             say(f"note: {note}")

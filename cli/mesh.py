@@ -77,6 +77,15 @@ def mesh(
             "from an unfilmed underside).",
         ),
     ] = True,
+    frame: Annotated[
+        str,
+        typer.Option(
+            "--frame",
+            help="recording: a converted recording's mesh in its own metric frame; "
+            "normalised: the unit-sphere frame the field was trained in (other datasets "
+            "have only this one).",
+        ),
+    ] = "recording",
     chunk: Annotated[int, typer.Option("--chunk", help="Points per field query.")] = 2**18,
     preview: Annotated[
         bool, typer.Option("--preview/--no-preview", help="Write a PNG preview.")
@@ -95,6 +104,8 @@ def mesh(
     fmt = format.lower()
     if fmt not in MESH_FORMATS:
         raise ConfigError(f"--format {format}: expected one of {', '.join(MESH_FORMATS)}")
+    if frame not in ("recording", "normalised"):
+        raise ConfigError(f"--frame {frame}: expected recording or normalised")
     if res < 8 or res > 2048:
         raise ConfigError(f"--res {res}: expected 8 .. 2048")
     if decimate < 0 or min_component < 0 or min_component_faces < 0 or component_gap < 0:
@@ -143,11 +154,21 @@ def mesh(
         from hybridneus.errors import MeshError
 
         raise MeshError(f"{run_dir}: the field has no zero level inside the volume at res {res}")
+    saved_frame = state.get("scene", {}).get("frame")
+    where = ""
+    if saved_frame is not None and frame == "recording":
+        import numpy as np
+
+        from hybridneus.recordings.frame import SceneFrame
+
+        scene_frame = SceneFrame.from_json(saved_frame, str(run_dir))
+        result.apply_transform(np.linalg.inv(scene_frame.matrix()))
+        where = ", in the recording's frame"
     path = Path(out) if out is not None else run_dir / f"mesh_{res}.{fmt}"
     save_mesh(result, path, fmt)
     typer.echo(
         f"{path}: {len(result.vertices)} vertices, {len(result.faces)} faces"
-        f"{', coloured' if color else ''} ({elapsed:.1f} s, "
+        f"{', coloured' if color else ''}{where} ({elapsed:.1f} s, "
         f"{100 * stats.active_fraction:.1f}% of the {res}-grid evaluated"
         f"{f'; {stats.filled_voxels} unseen voxels filled' if stats.filled_voxels else ''})"
     )

@@ -33,6 +33,7 @@ def preview(
 
     from hybridneus.cli.options import config_with
     from hybridneus.data import event_frame, load_dataset
+    from hybridneus.data.pictures import event_image
     from hybridneus.errors import ConfigError
     from hybridneus.fileio import atomic_path
 
@@ -55,16 +56,7 @@ def preview(
         t1 = v * dt
         t0 = max(t1 - length * dt, -sp.t_max if ds.preset.cyclic else 0.0)
         frame = event_frame(sp, t0, t1, 0.0)  # raw polarity sums show the structure best
-        scale = max(float(np.percentile(np.abs(frame[frame != 0]), 99)), 1.0) if (
-            frame.any()) else 1.0
-        a = np.clip(np.abs(frame) / scale, 0.0, 1.0)[..., None]
-        # BGR for OpenCV: positive red, negative blue.
-        pos = np.array([0.0, 0.0, 1.0])
-        neg = np.array([1.0, 0.0, 0.0])
-        colour = np.where(frame[..., None] > 0, pos, neg)
-        base = np.ones(3) if background == "white" else np.zeros(3)
-        img = base * (1 - a) + colour * a
-        img = (img * 255).round().astype(np.uint8)
+        img = np.ascontiguousarray(event_image(frame, background)[..., ::-1])  # BGR for cv2
         if sp.rgb_paths is not None:
             rgb = cv2.imread(str(sp.rgb_paths[v]), cv2.IMREAD_COLOR)
             if rgb is not None:  # real scenes ship unreadable placeholders

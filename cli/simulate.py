@@ -44,6 +44,9 @@ def simulate(
         help="Rays per pixel along each axis (anti-aliasing).")] = 2,
     threshold: Annotated[float, typer.Option(help="Contrast threshold C (log units).")] = 0.2,
     eps: Annotated[float, typer.Option(help="eps in log(I^2.2 + eps).")] = 1e-3,
+    sensor: Annotated[str, typer.Option(
+        help="The sensor's colour filter: a Bayer layout (RGGB, BGGR, GRBG, GBRG) or mono "
+             "(every pixel sees the mean of the three channels).")] = "RGGB",
     k1: Annotated[float, typer.Option(help="Radial distortion k1 (writes 5x4 intrinsics).")] = 0.0,
     k2: Annotated[float, typer.Option(help="Radial distortion k2.")] = 0.0,
     noise: Annotated[NoisePreset, typer.Option(
@@ -84,7 +87,7 @@ def simulate(
     rgb: Annotated[bool, typer.Option(help="Write rgb/r_*.png frames.")] = True,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
-    """Render SOURCE along a camera spiral and simulate a colour (RGGB) event camera.
+    """Render SOURCE along a camera spiral and simulate a colour (RGGB) or mono event camera.
 
     Writes OUT in the EventNeRF layout: train, validation and test splits.
 
@@ -130,7 +133,8 @@ def simulate(
             elevation_deg=elevation, width=width,
             height=height, fov_y_deg=fov, object_radius=object_radius, distortion=(k1, k2),
             supersample=supersample,
-            events=EventModel(threshold=threshold, eps=eps, polarity_offset=offset),
+            events=EventModel(threshold=threshold, eps=eps, polarity_offset=offset,
+                              mosaic=sensor),
             noise=replace(base_noise, **changes), shading=shading, seed=seed, val_views=val_views,
             test_views=test_views, n_threads=threads, write_rgb=rgb)
     except ValueError as exc:

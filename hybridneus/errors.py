@@ -25,3 +25,7 @@ class MeshError(HybridNeusError, ValueError):
 
 class RunError(HybridNeusError, ValueError):
     """A run directory or checkpoint is missing or unreadable."""
+
+
+class RecordingError(HybridNeusError, ValueError):
+    """A recording, pose track or calibration file cannot be read or does not fit together."""

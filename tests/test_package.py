@@ -15,6 +15,7 @@ PACKAGES = [
     "hybridneus.simulate",
     "hybridneus.meshing",
     "hybridneus.evaluation",
+    "hybridneus.recordings",
 ]
 
 

@@ -77,6 +77,9 @@ def test_data_flows_one_way():
     below = {
         "hybridneus.data": {"hybridneus.model", "hybridneus.rendering", "hybridneus.training",
                             "hybridneus.meshing", "hybridneus.evaluation"},
+        "hybridneus.recordings": {"hybridneus.model", "hybridneus.rendering",
+                                  "hybridneus.training", "hybridneus.meshing",
+                                  "hybridneus.evaluation"},
         "hybridneus.model": {"hybridneus.rendering", "hybridneus.training", "hybridneus.meshing"},
         "hybridneus.rendering": {"hybridneus.training", "hybridneus.meshing"},
         "hybridneus.meshing": {"hybridneus.training.trainer", "hybridneus.training.objective",

@@ -244,7 +244,9 @@ def load_events(path: str | Path, width: int, height: int) -> EventStream:
     (int16 x/y, float64 t, int8 p: 13 bytes per event).
 
     Args:
-        path: the ``.npz`` file with keys ``x`` (column), ``y`` (row), ``t``, ``p``.
+        path: the ``.npz`` file with keys ``x`` (column), ``y`` (row), ``t``, ``p``, and
+            optionally ``t_end``, the last view's time when the last event comes earlier
+            (``hybridneus convert`` writes it).
         width: image width; every ``x`` must be < width.
         height: image height; every ``y`` must be < height.
 
@@ -269,7 +271,7 @@ def load_events(path: str | Path, width: int, height: int) -> EventStream:
                 f"{path}: missing key(s) {', '.join(missing)} (found {sorted(keys)}; "
                 "expected x, y, t, p)"
             )
-        extra = sorted(keys - set(EVENT_KEYS))
+        extra = sorted(keys - set(EVENT_KEYS) - {"t_end"})
         if extra:
             log.info("%s: ignoring extra keys %s", path, extra)
         x_check, y_check = _PixelCheck("x", path), _PixelCheck("y", path)
@@ -282,6 +284,14 @@ def load_events(path: str | Path, width: int, height: int) -> EventStream:
         y = _read_member(zf, "y", path, np.int16, y_check)
         p = _read_member(zf, "p", path, np.int8, p_check)
         t = _read_member(zf, "t", path, np.float64, _TimeCheck(path))
+        t_end = None
+        if "t_end" in keys:
+            end = _read_member(zf, "t_end", path, np.float64, lambda c: c)
+            if end.shape != (1,) or not np.isfinite(end[0]) or end[0] < t[-1]:
+                raise DatasetError(
+                    f"{path}: key 't_end' must hold one finite time at or after the last "
+                    f"event's ({float(t[-1])}), got {end.tolist()[:3]}")
+            t_end = float(end[0])
     for key, arr in (("y", y), ("p", p), ("t", t)):
         if arr.shape[0] != n:
             raise DatasetError(f"{path}: key '{key}' has {arr.shape[0]} entries but 'x' has {n}")
@@ -299,4 +309,4 @@ def load_events(path: str | Path, width: int, height: int) -> EventStream:
         p -= 1
         note = ("boolean " if p_check.boolean else "") + "0/1 (converted to -1/+1)"
         log.warning("%s: polarity stored as %s", path, note)
-    return EventStream(x=x, y=y, t=t, p=p, path=path, polarity_note=note)
+    return EventStream(x=x, y=y, t=t, p=p, path=path, polarity_note=note, t_end=t_end)

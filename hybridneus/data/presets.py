@@ -47,6 +47,8 @@ class ScenePreset:
         background: RGB background colour in [0, 1].
         width: image width in pixels (the files do not store it; 346 for every published scene).
         height: image height in pixels (260 for every published scene).
+        mosaic: the sensor's colour filter: a Bayer layout (``RGGB`` for every published
+            scene, ``BGGR``, ``GRBG``, ``GBRG``) or ``mono`` (the field then renders grey).
     """
 
     group: str
@@ -63,6 +65,7 @@ class ScenePreset:
     background: tuple[float, float, float]
     width: int = DEFAULT_WIDTH
     height: int = DEFAULT_HEIGHT
+    mosaic: str = "RGGB"
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready dict (``background`` as a list)."""
@@ -121,7 +124,7 @@ SCENE_VALUES: dict[str, dict[str, dict[str, Any]]] = {
 PRESET_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(ScenePreset))
 _INT_FIELDS = {"max_window", "width", "height"}
 _BOOL_FIELDS = {"cyclic"}
-_STR_FIELDS = {"group", "scene"}
+_STR_FIELDS = {"group", "scene", "mosaic"}
 
 
 def preset_for_scene(group: str, scene: str) -> ScenePreset:
@@ -166,6 +169,10 @@ def _coerce(key: str, value: Any) -> Any:
     if key in _STR_FIELDS:
         if not isinstance(value, str):
             raise ConfigError(f"{key}: expected a string, got {value!r}")
+        if key == "mosaic":
+            from hybridneus.data.mosaic import check_mosaic
+
+            return check_mosaic(value)
         return value
     if key == "background":
         if isinstance(value, str):

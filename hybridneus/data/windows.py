@@ -136,15 +136,15 @@ def event_frame(
     return frame.astype(np.float32).reshape(split.height, split.width)
 
 
-def bayer_mask(xy: np.ndarray) -> np.ndarray:
-    """(n, 3) float32 one-hot RGGB colour of pixels ``xy`` (n, 2) = (column, row).
+def bayer_mask(xy: np.ndarray, mosaic: str = "RGGB") -> np.ndarray:
+    """(n, 3) float32 colour weights of pixels ``xy`` (n, 2) = (column, row) under the
+    sensor's ``mosaic`` (:func:`hybridneus.data.mosaic.mosaic_weights`).
 
-    R at (even row, even column), G at (even, odd) and (odd, even), B at (odd, odd).
+    RGGB: R at (even row, even column), G at (even, odd) and (odd, even), B at (odd, odd).
     """
-    x = np.asarray(xy)[:, 0] % 2
-    y = np.asarray(xy)[:, 1] % 2
-    channel = x + y  # 0 -> R, 1 -> G, 2 -> B
-    return np.eye(3, dtype=np.float32)[channel]
+    from hybridneus.data.mosaic import mosaic_weights
+
+    return mosaic_weights(xy, mosaic)
 
 
 @dataclass
@@ -157,7 +157,8 @@ class RayBatch:
         origins1: (n_rays, 3) float32 ray origins of the camera at ``t1``.
         dirs1: (n_rays, 3) float32 unit directions at ``t1``.
         target: (n_rays,) float32 ``C * E[y, x]`` (E with the polarity offset).
-        bayer: (n_rays, 3) float32 one-hot RGGB mask of each pixel.
+        bayer: (n_rays, 3) float32 channel weights of each pixel (one-hot under a Bayer
+            layout, thirds on a monochrome sensor).
         xy: (n_rays, 2) int64 pixel (column, row).
         view0: continuous view index of ``t0`` (wrapped into [0, N - 1]).
         view1: view index of ``t1`` (an integer value).
@@ -318,7 +319,8 @@ class EventWindowSampler:
             origins1=o1,
             dirs1=d1,
             target=torch.as_tensor(target, dtype=torch.float32, device=self.device),
-            bayer=torch.as_tensor(bayer_mask(xy), device=self.device),
+            bayer=torch.as_tensor(bayer_mask(xy, self.preset.mosaic),
+                                  device=self.device),
             xy=torch.as_tensor(xy, dtype=torch.int64, device=self.device),
             view0=t0_wrapped / self.dt,
             view1=float(i),

@@ -71,6 +71,8 @@ class HybridField(nn.Module):
         field: head configuration.
         background: RGB in [0, 1] composited behind the object (the scene preset's).
         crop: (radius, y_min, y_max) of the crop cylinder. Default: the whole volume.
+        grey: render grey (the mean of the colour head's channels, and of the background):
+            a monochrome sensor's events say nothing about colour.
 
     Attributes:
         device: where the parameters live.
@@ -89,8 +91,10 @@ class HybridField(nn.Module):
         field: FieldConfig,
         background: tuple[float, float, float] = (159 / 255,) * 3,
         crop: tuple[float, float, float] = (1.0, -1.0, 1.0),
+        grey: bool = False,
     ) -> None:
         super().__init__()
+        self.grey = bool(grey)
         from hybridneus.grids import FrequencyEncoding, HashGrid, SphericalHarmonics
 
         self.grid_config = grid
@@ -166,9 +170,10 @@ class HybridField(nn.Module):
 
     def background(self) -> torch.Tensor:
         """Background RGB (3,) in [0, 1]."""
+        bg = self.background_const
         if self.background_logit is not None:
-            return torch.sigmoid(self.background_logit)
-        return self.background_const
+            bg = torch.sigmoid(self.background_logit)
+        return bg.mean().expand(3) if self.grey else bg
 
     # ------------------------------------------------------------------ schedules
 
@@ -253,7 +258,8 @@ class HybridField(nn.Module):
             parts.append(self.color_encoding(self._grid_input(points)).to(points.dtype))
         if self.color_pe is not None:
             parts.append(self.color_pe(points))
-        return torch.sigmoid(self.color_net(torch.cat(parts, dim=-1)))
+        rgb = torch.sigmoid(self.color_net(torch.cat(parts, dim=-1)))
+        return rgb.mean(-1, keepdim=True).expand_as(rgb) if self.grey else rgb
 
     def crop_weight(self, points: torch.Tensor, softness: float) -> torch.Tensor:
         """Soft indicator (n,) of the crop cylinder: 1 inside, 0 beyond ``softness`` outside."""

@@ -145,7 +145,7 @@ def predicted_event_frame(
     c0, c1 = out.color[:m].clamp_min(0), out.color[m:].clamp_min(0)
     eps = float(preset.tonemap_eps)
     diff = torch.log(c1**2.2 + eps) - torch.log(c0**2.2 + eps)
-    bayer = torch.as_tensor(bayer_mask(xy), device=dev, dtype=diff.dtype)
+    bayer = torch.as_tensor(bayer_mask(xy, preset.mosaic), device=dev, dtype=diff.dtype)
     predicted = (diff * bayer).sum(-1).cpu().numpy().reshape(h, w)
     recorded = windows.frame(t0, t1)[:: stride, :: stride] * float(preset.threshold)
     return predicted.astype(np.float32), recorded.astype(np.float32)

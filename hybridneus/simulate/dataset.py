@@ -351,8 +351,10 @@ def _scene_json(config, source_mesh, scene_name, norm, camera, shading, results,
             "threshold": ev.threshold, "eps": ev.eps, "polarity_offset": ev.polarity_offset,
             "threshold_pos": ev.threshold * (1 + ev.polarity_offset),
             "threshold_neg": ev.threshold * (1 - ev.polarity_offset),
-            "log_mapping": "log(I**2.2 + eps) of the RGGB mosaic of the sRGB frame",
-            "bayer": "RGGB", "interpolation": "linear in time between frames",
+            "log_mapping": ("log(I**2.2 + eps) of the channel mean of the sRGB frame"
+                            if ev.mosaic == "mono" else
+                            f"log(I**2.2 + eps) of the {ev.mosaic} mosaic of the sRGB frame"),
+            "bayer": ev.mosaic, "interpolation": "linear in time between frames",
             "time_unit": "frame index: view i is at t = i; the latest event is pinned to N-1",
         },
         "noise": config.noise.to_json(),
@@ -376,7 +378,7 @@ def _scene_json(config, source_mesh, scene_name, norm, camera, shading, results,
             "neg_ratio": 0.1, "tonemap_eps": ev.eps, "crop_r": crop[0],
             "crop_y_min": crop[1], "crop_y_max": crop[2],
             "background": list(shading.background),
-            "width": camera.width, "height": camera.height,
+            "width": camera.width, "height": camera.height, "mosaic": ev.mosaic,
         },
         "config": _config_json(config),
     }
@@ -395,8 +397,10 @@ def _config_json(config: SimulationConfig) -> dict:
 
 
 def with_overrides(config: SimulationConfig, **changes) -> SimulationConfig:
-    """``dataclasses.replace`` that also accepts ``threshold``/``eps``/``polarity_offset``."""
-    ev = {k: changes.pop(k) for k in ("threshold", "eps", "polarity_offset") if k in changes}
+    """``dataclasses.replace`` that also accepts ``threshold``/``eps``/``polarity_offset``/
+    ``mosaic`` (fields of :class:`EventModel`)."""
+    ev = {k: changes.pop(k) for k in ("threshold", "eps", "polarity_offset", "mosaic")
+          if k in changes}
     if ev:
         changes["events"] = replace(config.events, **ev)
     return replace(config, **changes)

@@ -2,8 +2,9 @@
 
 Event model (ESIM-like, see docs/simulate.md):
 
-- Each rendered sRGB frame is mosaicked with the RGGB Bayer pattern (R at even row and even
-  column, G at (even, odd) and (odd, even), B at (odd, odd)) and converted to
+- Each rendered sRGB frame is mosaicked with the sensor's Bayer pattern (RGGB by default: R
+  at even row and even column, G at (even, odd) and (odd, even), B at (odd, odd)), or for a
+  monochrome sensor averaged over its three channels, and converted to
   ``L = log(I**2.2 + eps)``.
 - Every pixel keeps a reference level, initialised to ``L`` of the first frame. Between
   frames ``k-1`` and ``k`` the log intensity is interpolated linearly in time; each time it
@@ -39,11 +40,15 @@ class EventModel:
             need ``C_pos = C (1 + o)`` and negative ones ``C_neg = C (1 - o)``, so that
             ``C * sum(p + o)`` over a window recovers the log change exactly, which is the
             reader's model with ``polarity_offset = o``. Default: 0 (balanced).
+        mosaic: the sensor's colour filter: a Bayer layout (``RGGB``, ``BGGR``, ``GRBG``,
+            ``GBRG``), each pixel seeing one channel, or ``mono``, every pixel seeing the
+            mean of the three sRGB channels (what a grey field renders). Default: RGGB.
     """
 
     threshold: float = 0.2
     eps: float = 1e-3
     polarity_offset: float = 0.0
+    mosaic: str = "RGGB"
 
     def __post_init__(self) -> None:
         if not self.threshold > 0:
@@ -52,6 +57,12 @@ class EventModel:
             raise ValueError(f"eps must be > 0, got {self.eps}")
         if not -1.0 < self.polarity_offset < 1.0:
             raise ValueError(f"polarity_offset must be in (-1, 1), got {self.polarity_offset}")
+        from hybridneus.data.mosaic import check_mosaic
+
+        try:
+            object.__setattr__(self, "mosaic", check_mosaic(self.mosaic))
+        except HybridNeusError as exc:
+            raise ValueError(str(exc)) from None
 
 
 @dataclass(frozen=True)
@@ -90,11 +101,11 @@ REALISTIC_NOISE = NoiseConfig(threshold_sigma=0.03, background_rate=0.002,
                               hot_pixel_fraction=1e-4, hot_pixel_rate=0.5, refractory=0.0)
 
 
-def bayer_channel(height: int, width: int) -> np.ndarray:
-    """Channel index (0=R, 1=G, 2=B) of each pixel of the RGGB mosaic, (height, width) int64."""
-    rows = np.arange(height)[:, None] % 2
-    cols = np.arange(width)[None, :] % 2
-    return rows + cols  # (0,0)->0 R, (0,1)/(1,0)->1 G, (1,1)->2 B
+def bayer_channel(height: int, width: int, mosaic: str = "RGGB") -> np.ndarray:
+    """Channel index (0=R, 1=G, 2=B) of each pixel of a Bayer mosaic, (height, width) int64."""
+    from hybridneus.data.mosaic import channel_image
+
+    return channel_image(height, width, mosaic)
 
 
 def mosaic_rggb(frames: np.ndarray) -> np.ndarray:
@@ -162,8 +173,9 @@ class EventSimulator:
         self.height, self.width = first_frame.shape[:2]
         self._rng = np.random.default_rng(seed)
         # Flat index of each pixel's Bayer channel in a (height * width * 3) frame.
-        self._mosaic_idx = (np.arange(self.height * self.width) * 3
-                            + bayer_channel(self.height, self.width).reshape(-1))
+        self._mosaic_idx = None if self.model.mosaic == "mono" else (
+            np.arange(self.height * self.width) * 3
+            + bayer_channel(self.height, self.width, self.model.mosaic).reshape(-1))
         self._prev = self._log(first_frame)
         self._ref = self._prev.copy()
         n_pix = self._prev.size
@@ -229,8 +241,10 @@ class EventSimulator:
         """(height * width,) float64 log intensity of the mosaicked frame."""
         if frame.shape != (self.height, self.width, 3):
             raise ValueError(f"frame shape {frame.shape} != {(self.height, self.width, 3)}")
-        return log_intensity(np.ascontiguousarray(frame).reshape(-1)[self._mosaic_idx],
-                             self.model.eps)
+        flat = np.ascontiguousarray(frame).reshape(-1)
+        seen = flat.reshape(-1, 3).mean(axis=1) if self._mosaic_idx is None \
+            else flat[self._mosaic_idx]
+        return log_intensity(seen, self.model.eps)
 
     def _add_noise(self, k: int, pix_parts: list, t_parts: list, p_parts: list) -> None:
         rng, n_pix = self._rng, self._prev.size

@@ -69,7 +69,7 @@ def render_window_preview(trainer, view: int | None = None) -> dict[str, np.ndar
     c0, c1 = out.color[:m], out.color[m:]
     eps = trainer.tonemap_eps()  # the loss's eps at this step (eased early in training)
     diff = torch.log(c1.clamp_min(0) ** 2.2 + eps) - torch.log(c0.clamp_min(0) ** 2.2 + eps)
-    bayer = torch.as_tensor(bayer_mask(xy), device=dev)
+    bayer = torch.as_tensor(bayer_mask(xy, trainer.preset.mosaic), device=dev)
     pred = (diff * bayer).sum(-1).cpu().numpy().reshape(len(ys), len(xs))
     frame = win.frame(t0, t1) * trainer.preset.threshold
     events = frame[np.ix_(ys, xs)]

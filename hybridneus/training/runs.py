@@ -134,6 +134,7 @@ def build_field(cfg: Config, scene: dict[str, Any]):
         cfg.field,
         background=tuple(scene["background"]),
         crop=tuple(scene["crop"]),
+        grey=bool(scene.get("grey", False)),
     )
 
 

@@ -90,11 +90,14 @@ class Trainer:
             "background": [float(c) for c in p.background],
             "crop": [float(p.crop_r), float(p.crop_y_min), float(p.crop_y_max)],
             "tonemap_eps": float(p.tonemap_eps),
+            "grey": p.mosaic == "mono",  # a monochrome sensor: the field renders grey
+            "frame": _recording_frame(dataset),  # meshes go back to a recording's own frame
             # where the cameras stood: meshing fills the space none of them saw
             "cameras": self.split.c2w[:, :3, 3].astype(float).tolist(),
         }
         self.field = HybridField(cfg.grid, cfg.field, tuple(self.scene["background"]),
-                                 tuple(self.scene["crop"])).to(self.device)
+                                 tuple(self.scene["crop"]), grey=self.scene["grey"]
+                                 ).to(self.device)
         self.aabb = crop_aabb(self.field.crop.cpu()).to(self.device)
         r = cfg.render
         self.occupancy = OccupancyGrid(self.aabb, r.occupancy_resolution).to(self.device)
@@ -269,3 +272,12 @@ class Trainer:
 def default_scene_name(path: str | Path) -> str:
     """Run-folder prefix from a dataset path (its last component)."""
     return Path(path).resolve().name or "scene"
+
+
+def _recording_frame(dataset) -> dict | None:
+    """The converted recording's frame (``scene.json``), as saved with the checkpoint."""
+    from hybridneus.recordings.frame import read_scene_frame
+
+    root = getattr(dataset, "root", None)
+    frame = read_scene_frame(root) if root is not None else None
+    return frame.to_json() if frame is not None else None

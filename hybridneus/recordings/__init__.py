@@ -1,0 +1,47 @@
+"""Your own recordings: events in common formats, pose tracks, calibrations -> a dataset.
+
+``hybridneus convert`` (see ``docs/recordings.md``) is built from these parts:
+
+- :func:`open_events` reads AEDAT4, Prophesee RAW/DAT, HDF5, ROS bags, text and numpy
+  files in chunks;
+- :func:`read_pose_table` (TUM, CSV), :func:`read_colmap_track` (COLMAP models) and
+  :func:`read_turntable` give a camera track;
+- :func:`read_calibration` reads Kalibr, OpenCV and plain calibration files;
+- :func:`fit_frame` chooses the unit-sphere frame and keeps the way back;
+- :func:`convert_recording` writes the EventNeRF layout with ``scene.json``.
+"""
+
+from hybridneus.recordings.calibration import Calibration, read_calibration
+from hybridneus.recordings.colmap import is_colmap_model, read_colmap_track
+from hybridneus.recordings.convert import ConvertOptions, convert_recording
+from hybridneus.recordings.events import EventChunk, EventSource, open_events
+from hybridneus.recordings.frame import SceneFrame, fit_frame, read_scene_frame
+from hybridneus.recordings.poses import (
+    PoseTrack,
+    Turntable,
+    make_track,
+    read_matrix,
+    read_pose_table,
+    read_turntable,
+)
+
+__all__ = [
+    "Calibration",
+    "ConvertOptions",
+    "EventChunk",
+    "EventSource",
+    "PoseTrack",
+    "SceneFrame",
+    "Turntable",
+    "convert_recording",
+    "fit_frame",
+    "is_colmap_model",
+    "make_track",
+    "open_events",
+    "read_calibration",
+    "read_colmap_track",
+    "read_matrix",
+    "read_pose_table",
+    "read_scene_frame",
+    "read_turntable",
+]
