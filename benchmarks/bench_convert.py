@@ -1,7 +1,9 @@
 """Benchmark of ``hybridneus convert``: events per second and peak memory on long recordings.
 
-Writes a synthetic recording of N events (a DSEC-style HDF5 file with Blosc compression, or
-a text file), a turntable description and a calibration into a temporary folder, then runs
+Writes a synthetic recording of N events in one format (a DSEC-style HDF5 file with Blosc
+compression, AEDAT4, Prophesee EVT2/EVT3 RAW or DAT written by faery, a ROS 1 bag of
+``dvs_msgs/EventArray`` written by rosbags, text, or npz), a turntable description and a
+calibration into a temporary folder, then runs
 ``hybridneus convert`` on it in a fresh process and records its wall time, events per second
 and peak RSS (the child's ``ru_maxrss``). Convert streams the events twice, so peak memory
 should not grow with N; the result line states the size of the events as loaded by a fit
@@ -11,6 +13,11 @@ Usage::
 
     python benchmarks/bench_convert.py                    # 1e8 events, HDF5
     python benchmarks/bench_convert.py --events 1e7 --format txt
+    for f in h5 aedat4 evt3 evt2 dat bag txt npz; do
+        python benchmarks/bench_convert.py --format $f; done
+
+npz is the one format read whole (numpy loads an archive member at once), so its peak
+memory grows with N.
 """
 
 from __future__ import annotations
@@ -32,10 +39,85 @@ SECONDS = 600.0  # the recording's length: a ten-minute capture
 CHUNK = 1 << 23
 
 
+FORMATS = ("h5", "aedat4", "evt3", "evt2", "dat", "bag", "txt", "npz")
+
+
+def _chunks(n: int, rng: np.random.Generator):
+    """(t in microseconds, x, y, on) of consecutive events, CHUNK at a time."""
+    step = SECONDS / n
+    for s in range(0, n, CHUNK):
+        e = min(s + CHUNK, n)
+        yield (np.round(np.arange(s, e) * step * 1e6).astype(np.int64),
+               rng.integers(0, W, e - s), rng.integers(0, H, e - s),
+               rng.integers(0, 2, e - s).astype(bool))
+
+
+def _write_faery(folder: Path, n: int, fmt: str, rng: np.random.Generator) -> Path:
+    """faery writes from one array: the writer (not convert) holds 13 bytes per event."""
+    import faery
+
+    arr = np.zeros(n, dtype=faery.EVENTS_DTYPE)
+    s = 0
+    for t, x, y, on in _chunks(n, rng):
+        e = s + len(t)
+        arr["t"][s:e], arr["x"][s:e], arr["y"][s:e], arr["on"][s:e] = t, x, y, on
+        s = e
+    path = folder / f"events.{ {'evt2': 'raw', 'evt3': 'raw'}.get(fmt, fmt)}"
+    faery.events_stream_from_array(arr, dimensions=(W, H)).to_file(
+        path, version=fmt if fmt.startswith("evt") else None, zero_t0=False)
+    return path
+
+
+def _write_bag(folder: Path, n: int, rng: np.random.Generator, per_message: int = 20000
+               ) -> Path:
+    """A ROS 1 bag; each message is packed with numpy in the ROS 1 wire format (header,
+    height, width, then 13 bytes per event), which rosbags' serialiser would take hours
+    to build one Python object per event for."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register({
+        **get_types_from_msg("uint16 x\nuint16 y\ntime ts\nbool polarity\n",
+                             "dvs_msgs/msg/Event"),
+        **get_types_from_msg("std_msgs/Header header\nuint32 height\nuint32 width\n"
+                             "dvs_msgs/Event[] events\n", "dvs_msgs/msg/EventArray")})
+    packed = np.dtype({"names": ["x", "y", "sec", "nsec", "pol"],
+                       "formats": ["<u2", "<u2", "<u4", "<u4", "u1"],
+                       "offsets": [0, 2, 4, 8, 12], "itemsize": 13})
+    path = folder / "events.bag"
+    seq = 0
+    with Writer(path) as writer:
+        conn = writer.add_connection("/dvs/events", "dvs_msgs/msg/EventArray", typestore=store)
+        for t, x, y, on in _chunks(n, rng):
+            for s in range(0, len(t), per_message):
+                sl = slice(s, s + per_message)
+                rec = np.zeros(len(t[sl]), packed)
+                rec["x"], rec["y"], rec["pol"] = x[sl], y[sl], on[sl]
+                rec["sec"], rec["nsec"] = t[sl] // 10**6, (t[sl] % 10**6) * 1000
+                head = np.array([seq, rec["sec"][0], rec["nsec"][0], 3], "<u4").tobytes() \
+                    + b"dvs" + np.array([H, W, len(rec)], "<u4").tobytes()
+                writer.write(conn, int(t[sl][0]) * 1000, head + rec.tobytes())
+                seq += 1
+    return path
+
+
 def write_recording(folder: Path, n: int, fmt: str, seed: int = 0) -> Path:
-    """``n`` events spread over ten minutes, written chunk by chunk (never all in memory)."""
+    """``n`` events spread over ten minutes, written chunk by chunk (never all in memory)
+    except where the format's writer takes one array (faery's, numpy's npz)."""
     rng = np.random.default_rng(seed)
     step = SECONDS / n
+    if fmt in ("aedat4", "evt3", "evt2", "dat"):
+        return _write_faery(folder, n, fmt, rng)
+    if fmt == "bag":
+        return _write_bag(folder, n, rng)
+    if fmt == "npz":
+        cols = list(zip(*_chunks(n, rng), strict=True))
+        path = folder / "events.npz"
+        np.savez(path, t=np.concatenate(cols[0]), x=np.concatenate(cols[1]).astype(np.uint16),
+                 y=np.concatenate(cols[2]).astype(np.uint16),
+                 p=np.concatenate(cols[3]).astype(np.int8) * 2 - 1)
+        return path
     if fmt == "h5":
         import h5py
         import hdf5plugin
@@ -80,7 +162,7 @@ def write_setup(folder: Path) -> tuple[Path, Path]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--events", type=float, default=1e8)
-    ap.add_argument("--format", choices=("h5", "txt"), default="h5")
+    ap.add_argument("--format", choices=FORMATS, default="h5")
     ap.add_argument("--views", type=int, default=1000)
     ap.add_argument("--tmp", type=Path, default=None, help="folder for the recording")
     common.add_arguments(ap, "convert")

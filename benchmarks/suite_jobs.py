@@ -139,7 +139,8 @@ def _image_metrics(field, dataset, n_views: int) -> dict:
         mask = foreground_mask(gt, dataset.preset.background)
         if mask.any():
             img = render_view(field, split.intrinsics[int(i)], split.distortion[int(i)],
-                              split.c2w[int(i)], split.width, split.height, sampler)
+                              split.c2w[int(i)], split.width, split.height, sampler,
+                              lens=split.lens)
             m = color_corrected_psnr_ssim(img.color, gt, mask)
             psnrs.append(m.psnr)
             ssims.append(m.ssim)

@@ -60,6 +60,7 @@ def dataset_report(ds, cfg) -> dict[str, Any]:
             "polarity_stored_as": ev.polarity_note, "events_file": str(ev.path),
             "distortion": (np.median(s.distortion, axis=0).round(6).tolist()
                            if s.distortion.any() else None),
+            "lens": s.lens.to_json() if s.lens is not None else None,
         }
     from hybridneus.recordings.frame import read_scene_frame
 
@@ -139,6 +140,9 @@ def _print(report: dict[str, Any]) -> None:
         if s["distortion"]:
             k1, k2 = s["distortion"][:2]
             say(f"{name}: radial distortion k1={k1:.4g}, k2={k2:.4g}")
+        if s["lens"]:
+            coeffs = ", ".join(f"{c:.4g}" for c in s["lens"]["coeffs"])
+            say(f"{name}: {s['lens']['model']} lens ({coeffs}), undistorted at ray time")
     if report.get("frame"):
         f = report["frame"]
         say(f"frame: a converted recording, {f['scale']:.4g} normalised units per metre "

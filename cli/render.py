@@ -49,7 +49,8 @@ def _render_test_views(field, dataset, split_name: str, out: Path, max_views: in
         task = progress.add_task(f"render {split_name}", total=len(views))
         for i in views.astype(int):
             img = render_view(field, split.intrinsics[i], split.distortion[i], split.c2w[i],
-                              split.width, split.height, sampler, stride=stride)
+                              split.width, split.height, sampler, stride=stride,
+                              lens=split.lens)
             name = f"{split_name}_{i:05d}"
             normal = _to_uint8(0.5 * (img.normal + 1.0))
             depth = img.depth / max(float(img.depth[img.opacity > 0.5].max(initial=1e-6)), 1e-6)

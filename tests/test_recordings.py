@@ -91,6 +91,9 @@ def _write(rec: dict, fmt: str) -> Path:
             g.create_dataset("y", data=rec["y"].astype(np.uint16))
             g.create_dataset("p", data=on.astype(np.uint8))
             f.create_dataset("t_offset", data=np.int64(base))
+    elif fmt in ("bag1", "bag2"):
+        path = _write_bag(rec, root / ("events.bag" if fmt == "bag1" else "events-ros2"),
+                          ros2=fmt == "bag2")
     elif fmt == "txt":
         path = root / "events.txt"
         np.savetxt(path, np.column_stack([t_us / 1e6, rec["x"], rec["y"], on.astype(int)]),
@@ -98,6 +101,54 @@ def _write(rec: dict, fmt: str) -> Path:
     else:
         path = root / "events.npz"
         np.savez(path, x=rec["x"], y=rec["y"], t=t_us, p=rec["p"])
+    return path
+
+
+EVENT_MSG = "uint16 x\nuint16 y\ntime ts\nbool polarity\n"
+EVENT_ARRAY_MSG = ("std_msgs/Header header\nuint32 height\nuint32 width\n"
+                   "dvs_msgs/Event[] events\n")
+
+
+def _typestore(ros2: bool):
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE if ros2 else Stores.ROS1_NOETIC)
+    store.register({**get_types_from_msg(EVENT_MSG, "dvs_msgs/msg/Event"),
+                    **get_types_from_msg(EVENT_ARRAY_MSG, "dvs_msgs/msg/EventArray")})
+    return store
+
+
+def _write_bag(rec: dict, path: Path, ros2: bool, per_message: int = 997,
+               topics: tuple[str, ...] = ("/dvs/events",)) -> Path:
+    """The events as dvs_msgs/EventArray messages, serialised and written by rosbags."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import Writer as Writer2
+
+    store = _typestore(ros2)
+    Event, Array = store.types["dvs_msgs/msg/Event"], store.types["dvs_msgs/msg/EventArray"]
+    Time, Header = store.types["builtin_interfaces/msg/Time"], store.types["std_msgs/msg/Header"]
+    w, h = rec["size"]
+    writer = Writer2(path, version=9) if ros2 else Writer1(path)
+    with writer:
+        conns = [writer.add_connection(t, "dvs_msgs/msg/EventArray", typestore=store)
+                 for t in topics]
+        writer.add_connection("/imu", "std_msgs/msg/String", typestore=store)
+        t_us = rec["t_us"]
+        for k, s in enumerate(range(0, len(t_us), per_message)):
+            sl = slice(s, s + per_message)
+            events = [Event(x=int(x), y=int(y), ts=Time(sec=int(t // 10**6),
+                                                         nanosec=int(t % 10**6) * 1000),
+                            polarity=bool(p > 0))
+                      for x, y, t, p in zip(rec["x"][sl], rec["y"][sl], t_us[sl], rec["p"][sl],
+                                            strict=True)]
+            stamp = Time(sec=int(t_us[s] // 10**6), nanosec=0)
+            header = Header(stamp=stamp, frame_id="dvs" * (k % 3)) if ros2 else \
+                Header(seq=k, stamp=stamp, frame_id="dvs" * (k % 3))
+            msg = Array(header=header, height=h, width=w, events=events)
+            raw = store.serialize_cdr(msg, "dvs_msgs/msg/EventArray") if ros2 else \
+                store.serialize_ros1(msg, "dvs_msgs/msg/EventArray")
+            for conn in conns:
+                writer.write(conn, int(t_us[s]) * 1000, raw)
     return path
 
 
@@ -110,7 +161,8 @@ def _convert(rec: dict, events: Path, out: Path, **kw) -> dict:
                              progress=False)
 
 
-@pytest.mark.parametrize("fmt", ["aedat4", "evt2", "evt3", "dat", "h5", "txt", "npz"])
+@pytest.mark.parametrize("fmt", ["aedat4", "evt2", "evt3", "dat", "h5", "bag1", "bag2", "txt",
+                                 "npz"])
 def test_a_recording_converts_back_to_the_same_views_poses_and_events(recording, fmt,
                                                                         tmp_path):
     events = _write(recording, fmt)
@@ -382,3 +434,78 @@ def test_text_columns_and_units_are_read_as_told(tmp_path):
     (chunk,) = list(src.chunks())
     np.testing.assert_allclose(chunk.t, [1.5, 2.5])
     assert chunk.x.tolist() == [3, 5] and chunk.on.tolist() == [False, True]
+
+
+def test_bags_name_their_topics_when_the_event_topic_is_missing_or_ambiguous(recording,
+                                                                             tmp_path):
+    rec = {**recording, **{k: recording[k][:50] for k in ("t_us", "x", "y", "p")}}
+    two = _write_bag(rec, tmp_path / "two.bag", ros2=False, topics=("/left", "/right"))
+    with pytest.raises(RecordingError, match="several event topics.*--topic"):
+        open_events(two)
+    src = open_events(two, topic="/right")
+    assert sum(len(c) for c in src.chunks()) == 50 and src.size == recording["size"]
+    with pytest.raises(RecordingError, match="topic /imu holds std_msgs/msg/String"):
+        open_events(two, topic="/imu")
+    with pytest.raises(RecordingError, match="no topic /nope"):
+        open_events(two, topic="/nope")
+    from rosbags.rosbag2 import Writer
+
+    store = _typestore(True)
+    with Writer(tmp_path / "imu-only", version=9) as w:
+        conn = w.add_connection("/imu", "std_msgs/msg/String", typestore=store)
+        w.write(conn, 1, store.serialize_cdr(store.types["std_msgs/msg/String"](data="x"),
+                                             "std_msgs/msg/String"))
+    with pytest.raises(RecordingError, match=r"no event topic \(dvs_msgs/EventArray\).*/imu"):
+        open_events(tmp_path / "imu-only")
+    (tmp_path / "broken.bag").write_bytes(b"#ROSBAG V2.0\n" + b"\0" * 40)
+    with pytest.raises(RecordingError, match="broken.bag: cannot read as a ROS bag"):
+        open_events(tmp_path / "broken.bag")
+
+
+def test_a_colmap_model_gives_the_same_poses_as_the_tum_track(recording, tmp_path):
+    """COLMAP (world-to-camera, times from the image names) converts to the same views."""
+    import pycolmap
+
+    from hybridneus.recordings import read_colmap_track
+
+    model = pycolmap.Reconstruction()
+    w, h = recording["size"]
+    model.add_camera_with_trivial_rig(pycolmap.Camera(
+        model="PINHOLE", width=w, height=h, params=[30.0, 30.0, w / 2, h / 2], camera_id=1))
+    names = []
+    for i, c2w in enumerate(recording["c2w"]):
+        w2c = np.linalg.inv(c2w)
+        q = Rotation.from_matrix(w2c[:3, :3]).as_quat()  # x y z w, pycolmap's order
+        names.append(f"frame{i:03d}.png")
+        image = pycolmap.Image(name=names[-1], camera_id=1, image_id=i + 1)
+        model.add_image_with_trivial_frame(
+            image, pycolmap.Rigid3d(pycolmap.Rotation3d(q), w2c[:3, 3]))
+    for form in ("bin", "txt"):
+        (tmp_path / form).mkdir()
+        getattr(model, "write_binary" if form == "bin" else "write_text")(str(tmp_path / form))
+    times = tmp_path / "times.txt"
+    rows = [f"{n} {int(round(t * 1e6))}" for n, t in zip(names, recording["view_t"] + OFFSET,
+                                                         strict=True)]
+    times.write_text("name t_us\n" + "\n".join(rows[::-1]) + "\n")
+    events = _write(recording, "npz")
+    for form in ("bin", "txt"):
+        track = read_colmap_track(tmp_path / form, times, 1e-6)
+        assert len(track) == len(names)
+        root = recording["root"]
+        out = tmp_path / f"out-{form}"
+        convert_recording(open_events(events), track, read_calibration(root / "calib.json"),
+                          out, ConvertOptions(views=len(names), start=recording["view_t"][0],
+                                              end=recording["view_t"][-1],
+                                              clock_offset=OFFSET, mosaic="mono"),
+                          progress=False)
+        sp = load_dataset(out)["train"]
+        frame = read_scene_frame(out)
+        np.testing.assert_allclose(frame.rotation.T @ sp.c2w[:, :3, :3],
+                                   recording["c2w"][:, :3, :3], atol=1e-6)
+        np.testing.assert_allclose(frame.to_recording(sp.c2w[:, :3, 3]),
+                                   recording["c2w"][:, :3, 3], atol=1e-6)
+    with pytest.raises(RecordingError, match="has no time in its name; give --frame-times"):
+        read_colmap_track(tmp_path / "bin")
+    times.write_text("\n".join(rows[1:]) + "\n")
+    with pytest.raises(RecordingError, match="no time for 1 of the model's images"):
+        read_colmap_track(tmp_path / "bin", times)

@@ -13,6 +13,7 @@ one-line message that names the offending file or folder first.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 from collections.abc import Iterable
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from hybridneus.data.events import EventStream, load_events
+from hybridneus.data.lens import Lens, read_lens
 from hybridneus.data.presets import (
     PRESET_FIELDS,
     ScenePreset,
@@ -55,6 +57,8 @@ class SplitData:
         view_names: (n_views,) file stems of the pose files, in view order.
         events: the split's :class:`EventStream`.
         rgb_paths: paths of the rgb files in view order, or None when ``rgb/`` is absent.
+        lens: the distorted lens ``scene.json`` states (OpenCV's models; rays then come from
+            its per-pixel table), or None.
     """
 
     name: str
@@ -67,6 +71,7 @@ class SplitData:
     view_names: list[str]
     events: EventStream
     rgb_paths: list[Path] | None = None
+    lens: Lens | None = None
 
     @property
     def n_views(self) -> int:
@@ -343,6 +348,18 @@ def load_split(
     )
 
 
+def _scene_doc(root: Path) -> dict | None:
+    """``root/scene.json`` parsed, or None (preset resolution has already refused a bad one)."""
+    path = root / "scene.json"
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
 def load_dataset(
     root: str | os.PathLike,
     preset: ScenePreset | None = None,
@@ -405,5 +422,12 @@ def load_dataset(
                 have = ", ".join(found) if found else "none"
                 raise DatasetError(f"{root / s}: missing split folder (found: {have})")
     loaded = {s: load_split(found[s], preset.width, preset.height, notes) for s in wanted}
+    scene_doc = _scene_doc(root)
+    for sp in loaded.values():
+        sp.lens = read_lens(scene_doc, sp.intrinsics, sp.width, sp.height,
+                            str(root / "scene.json"))
+        if sp.lens is not None and sp.distortion.any():
+            raise DatasetError(f"{sp.path / 'intrinsics'}: 5x4 intrinsics (k1 k2) and a "
+                               f"scene.json lens both distort; give one")
     return EventDataset(root=root, preset=preset, preset_source=source, splits=loaded,
                         notes=notes, stated=stated)

@@ -93,7 +93,8 @@ class FrameRaySampler:
         idx = self.rng.integers(0, self.width * self.height, size=n_rays)
         xy = np.stack([idx % self.width, idx // self.width], axis=1)
         sp = self.split
-        o, d = camera_rays(sp.intrinsics[i], sp.distortion[i], sp.c2w[i], xy, device=self.device)
+        o, d = camera_rays(sp.intrinsics[i], sp.distortion[i], sp.c2w[i], xy, device=self.device,
+                           lens=sp.lens)
         color = self.frames[i, xy[:, 1], xy[:, 0]].astype(np.float32) / 255.0
         return FrameBatch(
             origins=o,

@@ -220,6 +220,10 @@ def project_to_pixels(
     cam = (points - c2w[:3, 3]) @ c2w[:3, :3]
     z = cam[:, 2]
     xn = cam[:, :2] / torch.where(z.abs() < 1e-9, 1e-9, z)[:, None]
+    if split.lens is not None:  # OpenCV's forward model, on the CPU
+        uv = split.lens.project(xn.detach().cpu().numpy())
+        uv = torch.as_tensor(uv, dtype=points.dtype, device=points.device) - 0.5
+        return torch.floor(uv[:, 0] + 0.5).long(), torch.floor(uv[:, 1] + 0.5).long(), z > 0
     k1, k2 = (float(v) for v in split.distortion[view])
     if k1 or k2:  # rays divide distorted coordinates by 1 + k1 r^2 + k2 r^4
         xd = xn.clone()

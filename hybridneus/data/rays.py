@@ -8,12 +8,19 @@ Conventions (as the EventNeRF reference code):
   approximate radial undistortion ``xn, yn /= 1 + k1 r^2 + k2 r^4`` with ``r^2 = xn^2 + yn^2``.
 - OpenCV camera axes (x right, y down, z forward); the direction is rotated by the
   camera-to-world rotation and normalised; the origin is the camera centre.
+- A split with a :class:`~hybridneus.data.lens.Lens` (OpenCV's radtan or fisheye models)
+  takes ``(xn, yn)`` from the lens's per-pixel table instead of ``K`` and ``k1 k2``.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import torch
+
+if TYPE_CHECKING:
+    from hybridneus.data.lens import Lens
 
 ArrayLike = np.ndarray | torch.Tensor
 
@@ -30,6 +37,7 @@ def camera_rays(
     c2w: ArrayLike,
     xy: ArrayLike,
     device: str | torch.device | None = None,
+    lens: Lens | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Rays through pixel centres.
 
@@ -39,6 +47,8 @@ def camera_rays(
         c2w: (4, 4), (3, 4), (n_rays, 4, 4) or (n_rays, 3, 4) camera-to-world (OpenCV axes).
         xy: (n_rays, 2) integer pixel coordinates, column first (x = column, y = row).
         device: output device; default: that of ``xy`` if it is a tensor, else CPU.
+        lens: the split's distorted lens (its table replaces ``K`` and ``distortion``), or
+            None.
 
     Returns:
         - origins: (n_rays, 3) float32 camera centres.
@@ -50,6 +60,12 @@ def camera_rays(
     """
     if device is None:
         device = xy.device if isinstance(xy, torch.Tensor) else torch.device("cpu")
+    if lens is not None:
+        ij = (xy.detach().cpu().numpy() if isinstance(xy, torch.Tensor)
+              else np.asarray(xy)).reshape(-1, 2).astype(np.int64)
+        cam = np.ones((ij.shape[0], 3))
+        cam[:, :2] = lens.table[ij[:, 1], ij[:, 0]]
+        return _world_rays(cam, c2w, device)
     pix = _as_f64(xy).reshape(-1, 2) + 0.5
     Kinv = np.linalg.inv(_as_f64(K))
     uv1 = np.concatenate([pix, np.ones_like(pix[:, :1])], axis=-1)
@@ -63,6 +79,10 @@ def camera_rays(
         r2 = cam[:, 0] ** 2 + cam[:, 1] ** 2
         factor = 1.0 + d[:, 0] * r2 + d[:, 1] * r2 * r2
         cam[:, :2] /= factor[:, None]
+    return _world_rays(cam, c2w, device)
+
+
+def _world_rays(cam: np.ndarray, c2w: ArrayLike, device) -> tuple[torch.Tensor, torch.Tensor]:
     pose = _as_f64(c2w)
     rot = pose[..., :3, :3]
     if rot.ndim == 2:

@@ -310,8 +310,10 @@ class EventWindowSampler:
         t0_wrapped = t0 + self.t_max if t0 < 0 else t0
         c2w0, k0 = self.pose_at(t0_wrapped)
         sp = self.split
-        o0, d0 = camera_rays(sp.intrinsics[k0], sp.distortion[k0], c2w0, xy, device=self.device)
-        o1, d1 = camera_rays(sp.intrinsics[i], sp.distortion[i], sp.c2w[i], xy, device=self.device)
+        o0, d0 = camera_rays(sp.intrinsics[k0], sp.distortion[k0], c2w0, xy,
+                             device=self.device, lens=sp.lens)
+        o1, d1 = camera_rays(sp.intrinsics[i], sp.distortion[i], sp.c2w[i], xy,
+                             device=self.device, lens=sp.lens)
         target = self.preset.threshold * frame[xy[:, 1], xy[:, 0]]
         return RayBatch(
             origins0=o0,

@@ -22,13 +22,17 @@ from hybridneus.fileio import atomic_path
 _PANEL = 420
 
 
-def project(points: np.ndarray, K: np.ndarray, c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def project(points: np.ndarray, K: np.ndarray, c2w: np.ndarray, lens=None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """Pixel (column, row) positions of normalised-frame ``points`` (n, 3) in a layout camera
-    (pixel centres at +0.5), and which of them lie in front of it."""
+    (pixel centres at +0.5; through ``lens``, a :class:`~hybridneus.data.lens.Lens`, when
+    the dataset has one), and which of them lie in front of it."""
     R, c = c2w[:3, :3], c2w[:3, 3]
     cam = (np.asarray(points, dtype=np.float64) - c) @ R
     front = cam[:, 2] > 1e-9
     z = np.where(front, cam[:, 2], 1.0)
+    if lens is not None:
+        return lens.project(cam[:, :2] / z[:, None]) - 0.5, front
     uv = (cam[:, :2] / z[:, None]) * np.array([K[0, 0], K[1, 1]]) + K[:2, 2]
     uv[:, 0] += K[0, 1] * cam[:, 1] / z
     return uv - 0.5, front
@@ -99,7 +103,7 @@ def event_pictures(ds: EventDataset, points: np.ndarray, out: Path, n: int = 4) 
         img = Image.fromarray(event_image(frame))
         draw = ImageDraw.Draw(img)
         if len(points):
-            uv, front = project(points, sp.intrinsics[v], sp.c2w[v])
+            uv, front = project(points, sp.intrinsics[v], sp.c2w[v], sp.lens)
             for (u, w), ok in zip(uv, front, strict=True):
                 if ok:
                     draw.ellipse([u - 4, w - 4, u + 4, w + 4], outline=(0, 160, 0), width=2)

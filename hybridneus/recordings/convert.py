@@ -281,10 +281,7 @@ def convert_recording(
         raise RecordingError(f"{source.path}: a calibration is needed (--calib) for the "
                              "camera's intrinsics")
     if calib.distorted:
-        raise RecordingError(
-            f"{calib.source}: lens model {calib.model} with non-zero coefficients: this "
-            "version writes undistorted (pinhole) cameras only; undistortion at ray time is "
-            "not supported yet")
+        _check_lens(calib, size)
     with make_progress("events", disable=not progress) as bar:
         task = bar.add_task("scan", total=getattr(source, "n_events", None))
         scan = _scan(source, track, size, options,
@@ -320,6 +317,37 @@ def convert_recording(
                               n_pos, size)
             (tmp / "scene.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
+
+
+def _check_lens(calib: Calibration, size: tuple[int, int]) -> None:
+    """Refuse a lens whose undistortion does not invert over the whole image (coefficients
+    far from any real lens), before anything is written."""
+    from hybridneus.data.lens import Lens
+    from hybridneus.errors import DatasetError
+
+    lens = Lens(calib.model, calib.coeffs, calib.layout_K(), *size)
+    try:
+        table = lens.table
+    except DatasetError:
+        table = None
+    if table is not None:
+        back = lens.project(table.reshape(-1, 2)).reshape(size[1], size[0], 2)
+        u, v = np.meshgrid(np.arange(size[0]) + 0.5, np.arange(size[1]) + 0.5)
+        err = float(np.abs(back - np.stack([u, v], -1)).max())
+    if table is None or not err < 0.01:
+        raise RecordingError(
+            f"{calib.source}: the {calib.model} lens {list(calib.coeffs)} does not invert over "
+            f"the {size[0]}x{size[1]} image (rays would be wrong); check the coefficients")
+    # the undistorted image's width against the pinhole's: a real lens stays within a few
+    # times (a 170-degree fisheye: about 8); coefficients in the wrong units or order do not
+    row = table[size[1] // 2, :, 0]
+    K = calib.layout_K()
+    ratio = float((row[-1] - row[0]) / ((size[0] - 1) / K[0, 0]))
+    if not 0.2 < ratio < 20.0:
+        raise RecordingError(
+            f"{calib.source}: the {calib.model} lens {list(calib.coeffs)} makes the image "
+            f"{ratio:.3g} times as wide as without it, far from any real lens (coefficients "
+            "in the wrong units or order?)")
 
 
 def _scene_json(source, track, calib, options, scan, times, frame: SceneFrame, cyclic,
@@ -358,5 +386,7 @@ def _scene_json(source, track, calib, options, scan, times, frame: SceneFrame, c
                   "clock_offset_s": options.clock_offset},
         "calibration": calib.to_json() | {
             "layout_K_note": "principal point + 0.5 px in the layout (pixel centres at +0.5)"},
+        **({"lens": {"model": calib.model, "coeffs": list(calib.coeffs)}}
+           if calib.distorted else {}),
         "preset": preset,
     }

@@ -80,6 +80,7 @@ def render_view(
     sampler: NeuSSampler | None = None,
     stride: int = 1,
     chunk_rays: int = 4096,
+    lens=None,
 ) -> ViewImages:
     """Render a camera of the dataset (or any pinhole camera) from ``field``.
 
@@ -90,6 +91,7 @@ def render_view(
             (a smaller image of (ceil(height / stride), ceil(width / stride))).
         sampler: from :func:`inference_sampler`; built on the fly when ``None``.
         chunk_rays: rays per forward pass (bounds memory).
+        lens: the split's :class:`~hybridneus.data.lens.Lens`, if it has one.
 
     Returns:
         :class:`ViewImages`.
@@ -102,7 +104,8 @@ def render_view(
     sampler = sampler if sampler is not None else inference_sampler(field)
     xy = pixel_grid(width, height, stride)
     h, w = len(range(0, height, stride)), len(range(0, width, stride))
-    origins, dirs = camera_rays(intrinsics, distortion, c2w, xy, device=field.device)
+    origins, dirs = camera_rays(intrinsics, distortion, c2w, xy, device=field.device,
+                                lens=lens)
     out = render_rays_chunked(field, origins, dirs, sampler, chunk_rays=chunk_rays)
     return ViewImages(
         color=out.color.clamp(0, 1).cpu().numpy().reshape(h, w, 3).astype(np.float32),
@@ -138,8 +141,10 @@ def predicted_event_frame(
     h, w = len(range(0, split.height, stride)), len(range(0, split.width, stride))
     (c2w0, k0), (c2w1, k1) = windows.pose_at(t0), windows.pose_at(t1)
     dev = field.device
-    o0, d0 = camera_rays(split.intrinsics[k0], split.distortion[k0], c2w0, xy, device=dev)
-    o1, d1 = camera_rays(split.intrinsics[k1], split.distortion[k1], c2w1, xy, device=dev)
+    o0, d0 = camera_rays(split.intrinsics[k0], split.distortion[k0], c2w0, xy, device=dev,
+                         lens=split.lens)
+    o1, d1 = camera_rays(split.intrinsics[k1], split.distortion[k1], c2w1, xy, device=dev,
+                         lens=split.lens)
     out = render_rays_chunked(field, torch.cat([o0, o1]), torch.cat([d0, d1]), sampler)
     m = xy.shape[0]
     c0, c1 = out.color[:m].clamp_min(0), out.color[m:].clamp_min(0)

@@ -58,8 +58,10 @@ def render_window_preview(trainer, view: int | None = None) -> dict[str, np.ndar
     xy = np.stack([gx.ravel(), gy.ravel()], axis=1).astype(np.int64)
     c2w0, k0 = win.pose_at(t0)
     dev = trainer.device
-    o0, d0 = camera_rays(split.intrinsics[k0], split.distortion[k0], c2w0, xy, device=dev)
-    o1, d1 = camera_rays(split.intrinsics[i], split.distortion[i], split.c2w[i], xy, device=dev)
+    o0, d0 = camera_rays(split.intrinsics[k0], split.distortion[k0], c2w0, xy, device=dev,
+                         lens=split.lens)
+    o1, d1 = camera_rays(split.intrinsics[i], split.distortion[i], split.c2w[i], xy, device=dev,
+                         lens=split.lens)
     field = trainer.field
     soft = trainer.cfg.render.crop_softness
     out = render_rays_chunked(
