@@ -13,7 +13,6 @@ one-line message that names the offending file or folder first.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from collections.abc import Iterable
@@ -24,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from hybridneus.data.events import EventStream, load_events
-from hybridneus.data.lens import Lens, read_lens
+from hybridneus.data.lens import Lens, split_lens
 from hybridneus.data.presets import (
     PRESET_FIELDS,
     ScenePreset,
@@ -348,18 +347,6 @@ def load_split(
     )
 
 
-def _scene_doc(root: Path) -> dict | None:
-    """``root/scene.json`` parsed, or None (preset resolution has already refused a bad one)."""
-    path = root / "scene.json"
-    if not path.is_file():
-        return None
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    return doc if isinstance(doc, dict) else None
-
-
 def load_dataset(
     root: str | os.PathLike,
     preset: ScenePreset | None = None,
@@ -422,12 +409,8 @@ def load_dataset(
                 have = ", ".join(found) if found else "none"
                 raise DatasetError(f"{root / s}: missing split folder (found: {have})")
     loaded = {s: load_split(found[s], preset.width, preset.height, notes) for s in wanted}
-    scene_doc = _scene_doc(root)
     for sp in loaded.values():
-        sp.lens = read_lens(scene_doc, sp.intrinsics, sp.width, sp.height,
-                            str(root / "scene.json"))
-        if sp.lens is not None and sp.distortion.any():
-            raise DatasetError(f"{sp.path / 'intrinsics'}: 5x4 intrinsics (k1 k2) and a "
-                               f"scene.json lens both distort; give one")
+        sp.lens = split_lens(root / "scene.json", sp.intrinsics, sp.distortion, sp.width,
+                             sp.height)
     return EventDataset(root=root, preset=preset, preset_source=source, splits=loaded,
                         notes=notes, stated=stated)

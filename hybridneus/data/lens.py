@@ -14,7 +14,9 @@ code does) are a different, older convention and stay in :mod:`hybridneus.data.r
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -134,4 +136,20 @@ def read_lens(doc: dict[str, Any] | None, K: np.ndarray, width: int, height: int
     return Lens(model=model, coeffs=coeffs, K=K[0].copy(), width=width, height=height)
 
 
-__all__ = ["LENS_MODELS", "Lens", "read_lens"]
+def split_lens(scene_json: Path, K: np.ndarray, distortion: np.ndarray, width: int,
+               height: int) -> Lens | None:
+    """The lens a dataset's ``scene.json`` states for a split with intrinsics ``K`` (n, 3, 3)
+    and EventNeRF distortion ``(k1, k2)`` (n, 2), or None; an unreadable ``scene.json`` has
+    already been refused by the preset's reader, so it counts as none here."""
+    try:
+        doc = json.loads(scene_json.read_text()) if scene_json.is_file() else None
+    except (OSError, ValueError):
+        doc = None
+    lens = read_lens(doc if isinstance(doc, dict) else None, K, width, height, str(scene_json))
+    if lens is not None and np.any(distortion):
+        raise DatasetError(f"{scene_json}: states a lens, and the 5x4 intrinsics (k1 k2) "
+                           "distort too; give one")
+    return lens
+
+
+__all__ = ["LENS_MODELS", "Lens", "read_lens", "split_lens"]
