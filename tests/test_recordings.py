@@ -420,6 +420,17 @@ def test_event_readers_refuse_what_they_cannot_read(tmp_path, monkeypatch):
     (tmp_path / "p.txt").write_text("0.1 2 3 1\n0.2 2 3 7\n")
     with pytest.raises(RecordingError, match="polarity"):
         list(open_events(tmp_path / "p.txt").chunks())
+    import faery
+
+    arr = np.zeros(10, dtype=faery.EVENTS_DTYPE)
+    arr["t"] = np.arange(10)
+    faery.events_stream_from_array(arr, dimensions=(8, 6)).to_file(
+        tmp_path / "v3.raw", version="evt3", zero_t0=False)
+    raw = (tmp_path / "v3.raw").read_bytes()
+    (tmp_path / "v4.raw").write_bytes(raw.replace(b"evt 3.0", b"evt 4.0")
+                                      .replace(b"EVT3", b"EVT4"))
+    with pytest.raises(RecordingError, match=r"v4.raw: cannot read as raw .*EVT4"):
+        open_events(tmp_path / "v4.raw")
     import sys
 
     monkeypatch.setitem(sys.modules, "faery", None)  # as if not installed
