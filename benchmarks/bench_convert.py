@@ -187,7 +187,7 @@ def main() -> None:
         peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         written = (folder / "out" / "train" / "events" / "events.npz").stat().st_size
     record = common.stamp(threads=None) | {
-        "benchmark": "convert", "format": args.format, "events": n, "views": args.views,
+        "bench": "convert", "format": args.format, "events": n, "views": args.views,
         "seconds": round(seconds, 2), "events_per_s": round(n / seconds),
         "peak_rss_mb": round(peak_mb, 1), "loaded_size_mb": round(13 * n / 2**20, 1),
         "npz_mb": round(written / 2**20, 1),

@@ -354,6 +354,29 @@ def readme_text(readme: str, lines: list[dict]) -> str:
     return readme[:head_end] + "\n".join(readme_block(lines, commit)) + "\n" + readme[end:]
 
 
+def recordings_section(rows: list[dict]) -> list[str]:
+    """bench_roundtrip.py: a converted recording and a mono sensor against the original."""
+    if not rows:
+        return []
+    out = ["## Recordings: converted against the original layout, mono against colour", "",
+           "One simulated scene written as an HDF5 recording with a metric 200 Hz TUM track "
+           "and a clock offset, converted by `hybridneus convert` and fitted with the same "
+           "preset, seed and steps as the original layout; and the same scene from a "
+           "monochrome sensor. Chamfer in the original scene's frame. Targets: converted / "
+           "original at most 1.10, mono / colour at most 1.3.", "",
+           "| scene | preset | steps | seed | events | CD original | CD converted | ratio | "
+           "CD mono | ratio | commit | machine | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| {r['scene']} | {r['preset']} | {r['iters']} | {r['seed']} | "
+                   f"{r['n_events']:,} | {_f(r['chamfer_original'])} | "
+                   f"{_f(r['chamfer_converted'])} | {r['converted_ratio']:.3f} | "
+                   f"{_f(r['chamfer_mono'])} | {r['mono_ratio']:.3f} | {r['commit']} | "
+                   f"{_cpu(r)} | {r['date'][:10]} |")
+    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
+    return out + ["", "  \n".join(commands), ""]
+
+
 def speed_section(results: dict[str, list[dict]]) -> list[str]:
     """The latest clean line of each speed benchmark's measurements."""
     out = ["## Speed", "", "The latest line of each measurement; timings are medians, and "
@@ -376,7 +399,8 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
                          ("floor", "Chamfer floors: ideal meshes that lack an unseen part"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
-                         ("data", "Data"), ("simulate", "Simulation")):
+                         ("data", "Data"), ("simulate", "Simulation"),
+                         ("convert", "Converting a recording (`hybridneus convert`)")):
         by_machine: dict[str, list[dict]] = defaultdict(list)
         for r in results.get(bench, []):
             by_machine[_cpu(r)].append(r)
@@ -386,7 +410,8 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             # of that commit)
             last = rows[-1]
             rows = [r for r in rows if r["commit"] == last["commit"]
-                    and (bench in ("early", "carving") or r["command"] == last["command"])]
+                    and (bench in ("early", "carving", "convert")
+                         or r["command"] == last["command"])]
             commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
             out += [f"### {title}: {cpu}, commit {last['commit']}, {last['date'][:10]}", "",
                     *_table(rows), "", "  \n".join(commands), ""]
@@ -445,6 +470,7 @@ def build(compare: list[tuple[str, str]]) -> str:
     out += variant_section(suite)
     out += suite_section(suite)
     out += cleanup_section(suite)
+    out += recordings_section(results.get("recordings", []))
     out += speed_section(results)
     return "\n".join(out).rstrip() + "\n"
 
