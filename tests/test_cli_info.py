@@ -97,7 +97,7 @@ def test_info_bad_set_exit_2(run_cli, scene):
 
 def test_preview_writes_pngs(run_cli, scene, tmp_path):
     # A readable rgb frame for view 0; the rest stay unreadable placeholders.
-    rgb0 = np.full((H * 2, W * 2, 3), 90, np.uint8)
+    rgb0 = np.full((H, W, 3), 90, np.uint8)
     cv2.imwrite(str(scene / "train" / "rgb" / "r_00000.png"), rgb0)
     out_dir = tmp_path / "prev"
     code, out, err = run_cli("preview", str(scene), "--out", str(out_dir),

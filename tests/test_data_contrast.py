@@ -20,13 +20,14 @@ N_VIEWS = 60
 
 def _dark_patch_events(count: int) -> dict:
     """``count`` negative events on each pixel of a 4x4 patch between views 10 and 20 (a
-    dark object edge passing), nothing elsewhere."""
+    dark object edge passing), nothing elsewhere but the stream's last event."""
     xs, ys = np.meshgrid(np.arange(4, 8), np.arange(5, 9))
     xs, ys = np.repeat(xs.ravel(), count), np.repeat(ys.ravel(), count)
     t = np.sort(np.random.default_rng(0).uniform(10, 20, size=xs.size))
     t[-1] = N_VIEWS - 1  # the stream ends at the last view
-    return {"x": xs.astype(np.int16), "y": ys.astype(np.int16), "t": t,
-            "p": -np.ones(xs.size, dtype=np.int8)}
+    p = -np.ones(xs.size, dtype=np.int8)
+    p[-1] = 1  # a stream of one polarity is refused; this one is outside views 10..20
+    return {"x": xs.astype(np.int16), "y": ys.astype(np.int16), "t": t, "p": p}
 
 
 @pytest.fixture

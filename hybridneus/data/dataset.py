@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,13 @@ from typing import Any
 import numpy as np
 
 from hybridneus.data.events import EventStream, load_events
+from hybridneus.data.checks import (
+    check_camera,
+    check_intrinsics,
+    check_poses,
+    check_view_names,
+)
+from hybridneus.data.imagesize import resolve_size
 from hybridneus.data.lens import Lens, split_lens
 from hybridneus.data.presets import (
     PRESET_FIELDS,
@@ -36,9 +44,6 @@ log = logging.getLogger(__name__)
 
 STANDARD_SPLITS = ("train", "validation", "test")
 _REQUIRED = ("pose", "intrinsics", "events")
-# Rotations written with 6 decimals are orthonormal to ~1e-6; 1e-3 still catches any scale,
-# shear or a mistyped entry.
-_ROT_TOL = 1e-3
 
 
 @dataclass
@@ -135,7 +140,13 @@ def _list_files(folder: Path, suffix: str | None) -> list[Path]:
         and e.is_file()
         and (suffix is None or e.name.lower().endswith(suffix))
     ]
-    return sorted(out, key=lambda p: p.name)
+    return sorted(out, key=lambda p: _natural(p.name))
+
+
+def _natural(name: str) -> list:
+    """Sort key that orders ``r_2`` before ``r_10`` (numbers compared as numbers)."""
+    return [(0, int(part), "") if part.isdigit() else (1, 0, part)
+            for part in re.split(r"(\d+)", name)]
 
 
 def _read_floats(path: Path, counts: tuple[int, ...], what: str) -> np.ndarray:
@@ -154,46 +165,6 @@ def _read_floats(path: Path, counts: tuple[int, ...], what: str) -> np.ndarray:
     return values
 
 
-def _check_poses(c2w: np.ndarray, files: list[Path]) -> None:
-    """Vectorised checks of (n_views, 4, 4) poses; the message names the first bad file."""
-
-    def fail(mask: np.ndarray, why: str) -> None:
-        if np.any(mask):
-            i = int(np.argmax(mask))
-            raise DatasetError(f"{files[i]}: {why}")
-
-    fail(~np.isfinite(c2w).all(axis=(1, 2)), "pose holds NaN or inf")
-    fail(
-        np.abs(c2w[:, 3] - np.array([0.0, 0.0, 0.0, 1.0])).max(axis=1) > 1e-6,
-        "last row of the 4x4 pose is not 0 0 0 1",
-    )
-    rot = c2w[:, :3, :3]
-    det = np.linalg.det(rot)
-    fail(np.abs(det) < 1e-8, "rotation is not invertible (determinant 0)")
-    gram_err = np.abs(np.einsum("nji,njk->nik", rot, rot) - np.eye(3)).max(axis=(1, 2))
-    fail(
-        (np.abs(det - 1.0) > 10 * _ROT_TOL) | (gram_err > _ROT_TOL),
-        "top-left 3x3 is not a rotation (needs orthonormal columns and determinant +1)",
-    )
-
-
-def _check_intrinsics(K: np.ndarray, dist: np.ndarray, files: list[Path]) -> None:
-    """Vectorised checks of (n_views, 3, 3) K and (n_views, 2) distortion."""
-
-    def fail(mask: np.ndarray, why: str) -> None:
-        if np.any(mask):
-            i = int(np.argmax(mask))
-            raise DatasetError(f"{files[i]}: {why}")
-
-    fail(~(np.isfinite(K).all(axis=(1, 2)) & np.isfinite(dist).all(axis=1)),
-         "intrinsics hold NaN or inf")
-    fail(np.abs(K[:, 2] - np.array([0.0, 0.0, 1.0])).max(axis=1) > 1e-6,
-         "third row of K is not 0 0 1")
-    fail((K[:, 0, 0] <= 0) | (K[:, 1, 1] <= 0),
-         "K is not invertible: focal lengths fx, fy must be > 0")
-    fail(np.abs(K[:, 1, 0]) > 1e-6, "K[1, 0] must be 0 (upper-triangular pinhole matrix)")
-
-
 def read_camera_centres(split_dir: str | os.PathLike) -> np.ndarray:
     """Camera centres (n_views, 3) from the ``pose/`` files of one split folder, without
     reading its events.
@@ -205,7 +176,7 @@ def read_camera_centres(split_dir: str | os.PathLike) -> np.ndarray:
     if not pose_files:
         raise DatasetError(f"{Path(split_dir) / 'pose'}: no .txt pose files")
     c2w = _read_pose_matrices(pose_files)
-    _check_poses(c2w, pose_files)
+    check_poses(c2w, pose_files)
     return c2w[:, :3, 3].copy()
 
 
@@ -227,6 +198,8 @@ def _read_views(split_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, li
             f"{split_dir}: view counts differ: pose/ has {len(pose_files)} files, "
             f"intrinsics/ has {len(intr_files)}"
         )
+    check_view_names({"pose": [f.stem for f in pose_files],
+                      "intrinsics": [f.stem for f in intr_files]}, split_dir)
     n = len(pose_files)
     c2w = _read_pose_matrices(pose_files)
     K = np.empty((n, 3, 3))
@@ -237,8 +210,8 @@ def _read_views(split_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, li
         K[i] = m[:3, :3]
         if m.shape[0] == 5:
             dist[i] = m[4, :2]
-    _check_poses(c2w, pose_files)
-    _check_intrinsics(K, dist, intr_files)
+    check_poses(c2w, pose_files)
+    check_intrinsics(K, dist, intr_files)
     return c2w, K, dist, [f.stem for f in pose_files]
 
 
@@ -306,6 +279,8 @@ def load_split(
                 f"{split_dir}: view counts differ: pose/ has {len(names)} files, "
                 f"rgb/ has {len(rgb_paths)}"
             )
+        else:
+            check_view_names({"pose": names, "rgb": [p.stem for p in rgb_paths]}, split_dir)
     npz = _list_files(split_dir / "events", ".npz")
     if len(npz) != 1:
         listed = ", ".join(p.name for p in npz) if npz else "none"
@@ -314,6 +289,7 @@ def load_split(
             f"({listed})"
         )
     _check_resolution(K, width, height, split_dir, notes)
+    check_camera(K, dist, _list_files(split_dir / "intrinsics", ".txt"), width, height)
     radius = float(np.linalg.norm(c2w[:, :3, 3], axis=1).max())
     if radius > 1.0:
         msg = (
@@ -408,6 +384,7 @@ def load_dataset(
             if s not in found:
                 have = ", ".join(found) if found else "none"
                 raise DatasetError(f"{root / s}: missing split folder (found: {have})")
+    preset = resolve_size(preset, stated, source, [found[s] for s in wanted], notes)
     loaded = {s: load_split(found[s], preset.width, preset.height, notes) for s in wanted}
     for sp in loaded.values():
         sp.lens = split_lens(root / "scene.json", sp.intrinsics, sp.distortion, sp.width,

@@ -26,6 +26,7 @@ from typing import Any
 from hybridneus.config import DataConfig, EstimateConfig
 from hybridneus.data.dataset import EventDataset
 from hybridneus.data.presets import apply_overrides
+from hybridneus.errors import DatasetError
 
 log = logging.getLogger("hybridneus")
 
@@ -84,6 +85,12 @@ def estimate_scene(
     data = data if data is not None else DataConfig()
     found = Estimates(dataset)
     split = dataset[data.split]
+    ev = split.events
+    if len(ev) and ev.n_positive in (0, len(ev)):
+        raise DatasetError(
+            f"{ev.path}: every event has polarity {'+1' if ev.n_positive else '-1'} (stored as "
+            f"{ev.polarity_note}); a recording holds both, and a fit needs both (a polarity "
+            "column of another convention, or a filtered file?)")
     if cfg.polarity_offset and data.polarity_offset is None:
         _polarity_offset(found, split)
     if cfg.crop and all(getattr(data, k) is None for k in CROP_KEYS):

@@ -209,6 +209,10 @@ def _read_member(
                         f"{path}: key '{key}' has shape {shape}, expected 1-D"
                     )
                 n = int(np.prod(shape))
+                held = zf.getinfo(f"{key}.npy").file_size
+                if n * dtype.itemsize > held:  # before allocating what the header claims
+                    raise DatasetError(
+                        f"{path}: key '{key}' claims {n:,} entries but holds {held:,} bytes")
                 out = np.empty(n, dtype=out_dtype)
                 step = _CHUNK
                 for s in range(0, n, step):
@@ -297,6 +301,9 @@ def load_events(path: str | Path, width: int, height: int) -> EventStream:
             raise DatasetError(f"{path}: key '{key}' has {arr.shape[0]} entries but 'x' has {n}")
     if t[-1] <= 0:
         raise DatasetError(f"{path}: largest timestamp is {float(t[-1])}; expected > 0")
+    if t[0] < 0:
+        raise DatasetError(f"{path}: timestamps start at {float(t[0])} < 0; view i of N sits "
+                           "at i / (N - 1) * max(t), so t must count from 0")
     if x_check.max >= width or y_check.max >= height:
         raise DatasetError(
             f"{path}: pixels outside the image: max x={x_check.max}, max y={y_check.max} "

@@ -261,7 +261,8 @@ def _preset_from_parts(
 
 
 def _read_scene_json(path: Path) -> dict[str, Any] | None:
-    """The ``preset`` object of ``scene.json`` (plus top-level width/height), or None."""
+    """The ``preset`` object of ``scene.json`` plus the image size it states anywhere
+    (``preset``, the top level or ``camera``), or None when it states neither."""
     try:
         doc = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
@@ -271,15 +272,33 @@ def _read_scene_json(path: Path) -> dict[str, Any] | None:
     if not isinstance(doc, dict):
         raise DatasetError(f"{path}: expected a JSON object at the top level")
     preset = doc.get("preset")
-    if preset is None:
-        return None
-    if not isinstance(preset, dict):
+    if preset is not None and not isinstance(preset, dict):
         raise DatasetError(f"{path}: 'preset' must be an object of ScenePreset fields")
-    preset = dict(preset)
-    for key in ("width", "height"):
-        if key not in preset and isinstance(doc.get(key), int):
-            preset[key] = doc[key]
-    return preset
+    values = dict(preset or {}) | _scene_size(doc, path)
+    return values or None
+
+
+def _scene_size(doc: dict[str, Any], path: Path) -> dict[str, int]:
+    """``width``/``height`` wherever ``scene.json`` states them; they must be positive
+    integers and agree between places."""
+    found: dict[str, tuple[int, str]] = {}
+    places = (("preset", doc.get("preset")), ("top level", doc), ("camera", doc.get("camera")))
+    for where, obj in places:
+        if not isinstance(obj, dict):
+            continue
+        for key in ("width", "height"):
+            if key not in obj:
+                continue
+            v = obj[key]
+            if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 1 \
+                    or not float(v).is_integer():
+                raise DatasetError(f"{path}: {key} ({where}) must be a positive integer, "
+                                   f"got {v!r}")
+            if key in found and found[key][0] != int(v):
+                raise DatasetError(f"{path}: {key} {found[key][0]} ({found[key][1]}) and "
+                                   f"{int(v)} ({where}) disagree")
+            found.setdefault(key, (int(v), where))
+    return {k: v for k, (v, _) in found.items()}
 
 
 def preset_for_path(path: str | os.PathLike) -> ScenePreset:
