@@ -53,6 +53,8 @@ def evaluate(
         raise ConfigError(f"--sign {sign}: expected one of {', '.join(SIGN_METHODS)}")
     if error_max <= 0:
         raise ConfigError(f"--error-max {error_max}: expected a positive distance")
+    if not threshold > 0:
+        raise ConfigError(f"--threshold {threshold}: expected a positive distance")
     pred_mesh = load_mesh(mesh)
     gt_mesh = load_mesh(gt)
     start = time.perf_counter()

@@ -8,6 +8,7 @@ Example:
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -199,6 +200,17 @@ def _fix_budget(trainer, logger, end: float) -> None:
                                   lengthen_after=opened if t.replan_lengthen else None)
 
 
+def _same_dataset(run_dir: Path, recorded: str, given: Any) -> None:
+    """Refuse to continue a run on another dataset than the one it was fitted on (a moved
+    dataset, whose recorded folder is gone, is taken as the same)."""
+    if given is None or not isinstance(given, str | os.PathLike):
+        return
+    was, now = Path(recorded), Path(given)
+    if was.exists() and was.resolve() != now.resolve():
+        raise RunError(f"{run_dir}: was fitted on {was}; resuming it on {now} would train one "
+                       f"field on two datasets (fit {now} without --resume, or leave DATA out)")
+
+
 def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequence[str], dev):
     """A trainer that continues ``run_dir`` from its last checkpoint, on the scene record's
     values (nothing is estimated again)."""
@@ -217,6 +229,7 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
         raise ConfigError("train.minutes: a resumed run keeps its schedule; give --iters to "
                           "change its length")
     record = SceneRecord.load(run_dir / FILENAME)
+    _same_dataset(run_dir, record.dataset, dataset)
     path = dataset if dataset is not None else record.dataset
     data = load_dataset(path, overrides=record.preset_overrides(), splits=record.split)
     trainer = Trainer(cfg, data, record, dev)
@@ -225,9 +238,16 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
     except (RuntimeError, KeyError, ValueError) as exc:
         first = (str(exc).splitlines() or [type(exc).__name__])[0]
         raise RunError(f"{run_dir / runs.CHECKPOINT}: cannot resume ({first})") from None
+    asked = any(str(o).replace(" ", "").startswith("train.iters=") for o in overrides or ())
+    if asked and cfg.train.iters <= trainer.step:
+        raise ConfigError(
+            f"train.iters {cfg.train.iters}: {run_dir} is already at step {trainer.step}; the "
+            "count is of all steps, so ask for more")
     if cfg.train.iters != saved.train.iters:
-        trainer.total_steps = record.steps = max(trainer.step + 1, cfg.train.iters)
+        trainer.total_steps = record.steps = cfg.train.iters
         record.steps_from = "train.iters (changed on resume)"
+    logging.getLogger("hybridneus").info("resuming %s from step %d of %d", run_dir,
+                                         trainer.step, trainer.total_steps)
     trainer.deadline = None
     record.stopped_at = None  # the resumed run goes on to the schedule's end
     logger = RunLogger(run_dir, run_dir.parent, resume_step=trainer.step)

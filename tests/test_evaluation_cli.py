@@ -84,6 +84,8 @@ def test_eval_errors_draws_a_floater_in_the_last_colour(tmp_path, cli):
     assert bottom.sum() > 20 and top.sum() == 0
     code, _, err = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--error-max", "0")
     assert code == 2 and "--error-max 0" in err
+    code, _, err = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--threshold", "-1")
+    assert code == 2 and "--threshold -1.0: expected a positive distance" in err
 
 
 def test_eval_parts_says_which_part_is_missing(tmp_path, cli):

@@ -143,6 +143,25 @@ def test_resume_continues_with_identical_state(scene, tmp_path):
     assert steps == sorted(set(steps)) and steps[-1] == 6
 
 
+def test_resume_refuses_another_dataset_and_a_count_it_has_passed(scene, tmp_path, caplog):
+    import shutil
+
+    cfg = tiny("train.iters=4", "train.seed=5")
+    first = fit(scene, cfg, out=tmp_path / "runs", device="cpu")
+    other = tmp_path / "other"
+    shutil.copytree(scene, other)
+    with pytest.raises(RunError, match=r"was fitted on .*; resuming it on .*other would train"):
+        prepare(other, None, resume=first.run_dir, device="cpu")
+    with pytest.raises(ConfigError, match=r"train.iters 3: .* is already at step 4; the count "
+                                          r"is of all steps"):
+        prepare(None, None, ["train.iters=3"], resume=first.run_dir, device="cpu")
+    with caplog.at_level("INFO", logger="hybridneus"):
+        trainer, _ = prepare(scene, None, ["train.iters=6"], resume=first.run_dir,
+                             device="cpu")
+    assert trainer.step == 4 and trainer.total_steps == 6
+    assert f"resuming {first.run_dir} from step 4 of 6" in caplog.text
+
+
 def test_resume_from_a_checkpoint_saved_on_another_kind_of_device(scene, tmp_path, caplog):
     # A CUDA generator's state is 16 bytes (seed and offset); a CPU one's is far longer, so
     # a GPU run resumed on a CPU (or the reverse) cannot restore it.
