@@ -160,3 +160,30 @@ def test_without_frames_a_far_principal_point_gives_the_size(tmp_path):
     ds = load_dataset(tmp_path / "s")
     assert (ds.preset.width, ds.preset.height) == (w, h)
     assert any("from the principal point" in n for n in ds.notes)
+
+
+def test_a_symlink_loop_is_an_error_naming_it(tmp_path):
+    write_split(tmp_path / "s" / "train", n_views=4)
+    npz = tmp_path / "s" / "train" / "events" / "events.npz"
+    npz.unlink()
+    npz.symlink_to("events.npz")
+    with pytest.raises(DatasetError, match=r"events.npz: cannot read \(Too many levels"):
+        load_dataset(tmp_path / "s", overrides=SIZE)
+
+
+def test_a_checkpoint_without_its_scene_record_is_refused_by_name(tiny_scene, tmp_path,
+                                                                   run_cli):
+    import shutil
+
+    import torch
+
+    run = next(p for p in (tiny_scene / "runs").iterdir() if p.is_dir() and not p.is_symlink())
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    path = copy / "checkpoints" / "last.pt"
+    state = torch.load(path, weights_only=True)
+    del state["scene"]
+    torch.save(state, path)
+    code, _, err = run_cli("mesh", str(copy), "--res", "16", "--out", str(tmp_path / "m.ply"))
+    assert code == 2 and "last.pt: checkpoint lacks scene" in err and err.count("\n") == 1
+    assert not (tmp_path / "m.ply").exists()

@@ -137,10 +137,17 @@ def _list_files(folder: Path, suffix: str | None) -> list[Path]:
         Path(e.path)
         for e in entries
         if not e.name.startswith(".")
-        and e.is_file()
         and (suffix is None or e.name.lower().endswith(suffix))
+        and _is_file(e)
     ]
     return sorted(out, key=lambda p: _natural(p.name))
+
+
+def _is_file(entry: os.DirEntry) -> bool:
+    try:
+        return entry.is_file()
+    except OSError as exc:  # a symlink loop, for one
+        raise DatasetError(f"{entry.path}: cannot read ({exc.strerror})") from None
 
 
 def _natural(name: str) -> list:

@@ -110,6 +110,11 @@ def load_checkpoint(run_dir: str | os.PathLike, map_location: Any = "cpu") -> di
         raise RunError(f"{path}: cannot read checkpoint ({first})") from None
     if not isinstance(state, dict) or "model" not in state:
         raise RunError(f"{path}: not a hybridneus checkpoint")
+    missing = [k for k in ("scene", "step", "total_steps") if k not in state]
+    if missing or not isinstance(state["scene"], dict):
+        what = ", ".join(missing) if missing else "scene (not a mapping)"
+        raise RunError(f"{path}: checkpoint lacks {what} (written by another tool, or "
+                       "damaged)")
     return state
 
 
