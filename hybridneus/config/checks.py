@@ -54,6 +54,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("train.log_every", lambda v: v >= 1, ">= 1"),
     ("train.preview_every", lambda v: v >= 0, ">= 0 (0: never)"),
     ("train.checkpoint_every", lambda v: v >= 0, ">= 0 (0: only at the end)"),
+    ("train.checkpoint_seconds", lambda v: v >= 0, ">= 0 (0: by steps only)"),
     ("train.window", lambda v: v in ("per_iteration", "per_load"), "per_iteration or per_load"),
     ("train.view_balance", _fraction, "a share in [0, 1]"),
     ("train.supervision", lambda v: v in ("events", "rgb"), "'events' or 'rgb'"),

@@ -119,6 +119,7 @@ class TrainConfig:
     log_every: int = 10  # steps between metrics.csv rows / TensorBoard scalars
     preview_every: int = 500  # steps between preview PNGs (0: never)
     checkpoint_every: int = 500  # steps between checkpoints (and always at the end)
+    checkpoint_seconds: float = 60.0  # a checkpoint at least this often, wall seconds (0: off)
     window: str = "per_iteration"  # event-window sampling: per_iteration | per_load
     view_balance: float = 0.0  # share of windows drawn evenly over viewing directions
     supervision: str = "events"  # events, or rgb: the rgb/ frames (2 * n_rays pixels per step)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,7 @@ class RunLogger:
         self.run_dir = Path(run_dir)
         self.runs_root = Path(runs_root) if runs_root is not None else None
         self.metrics_path = self.run_dir / "metrics.csv"
+        self._saved_at = time.perf_counter()
         self.history: list[dict[str, float]] = []
         self.columns: list[str] | None = None
         self._load_metrics(resume_step)
@@ -62,13 +64,14 @@ class RunLogger:
             tmp.write_text(buf.getvalue())
 
     def start(self, trainer) -> None:
-        """Write ``config.yaml`` and ``scene.yaml`` and point ``latest`` at this run."""
+        """Write ``config.yaml`` and ``scene.yaml``, and remove what killed saves left.
+        ``latest`` moves to this run when it finishes, so a failed fit never moves it."""
         from hybridneus.training.scene import FILENAME
 
         save_config(trainer.cfg, self.run_dir / "config.yaml")
         trainer.record.save(self.run_dir / FILENAME)
-        if self.runs_root is not None:
-            runs.set_latest(self.runs_root, self.run_dir)
+        runs.remove_stale_temporaries(self.run_dir)
+        self._saved_at = time.perf_counter()
 
     def after_step(self, trainer, logs: dict[str, float]) -> None:
         """Log metrics, write previews and checkpoints on their schedules."""
@@ -82,7 +85,9 @@ class RunLogger:
                     self.tb.add_scalar(key, value, step)
         if t.preview_every > 0 and step % t.preview_every == 0:
             self.preview(trainer)
-        if t.checkpoint_every > 0 and step % t.checkpoint_every == 0:
+        due = t.checkpoint_every > 0 and step % t.checkpoint_every == 0
+        late = 0 < t.checkpoint_seconds <= time.perf_counter() - self._saved_at
+        if due or late:
             self.checkpoint(trainer)
 
     def _append(self, row: dict[str, float]) -> None:
@@ -104,8 +109,11 @@ class RunLogger:
             writer.writerow({k: _fmt(row.get(k)) for k in self.columns})
 
     def checkpoint(self, trainer) -> Path:
-        """Save the trainer's full state atomically."""
-        return runs.save_checkpoint(self.run_dir, trainer.state_dict())
+        """Save the trainer's full state atomically (the one before stays as
+        ``previous.pt``)."""
+        path = runs.save_checkpoint(self.run_dir, trainer.state_dict())
+        self._saved_at = time.perf_counter()
+        return path
 
     def preview(self, trainer) -> None:
         """Write ``previews/step_<n>.png`` and ``previews/curve.png``."""
@@ -124,6 +132,8 @@ class RunLogger:
         if trainer.stopped_early:
             trainer.record.stopped_at = trainer.step
         trainer.record.save(self.run_dir / FILENAME)
+        if self.runs_root is not None:
+            runs.set_latest(self.runs_root, self.run_dir)
         if self.history:
             from hybridneus.training.previews import write_curve
 

@@ -11,7 +11,9 @@ load with ``torch.load(..., weights_only=True)``.
 
 from __future__ import annotations
 
+import logging
 import os
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -24,6 +26,8 @@ from hybridneus.errors import ConfigError, RunError
 from hybridneus.fileio import atomic_path
 
 CHECKPOINT = Path("checkpoints") / "last.pt"
+#: The checkpoint before the last one: read when the last is missing or unreadable.
+PREVIOUS = Path("checkpoints") / "previous.pt"
 LATEST = "latest"
 
 
@@ -84,23 +88,60 @@ def latest_run(runs_root: str | os.PathLike = "runs") -> Path:
 
 
 def save_checkpoint(run_dir: str | os.PathLike, state: dict[str, Any]) -> Path:
-    """Write ``state`` to ``<run_dir>/checkpoints/last.pt`` atomically; return the path."""
-    path = Path(run_dir) / CHECKPOINT
-    with atomic_path(path) as tmp:
-        torch.save(state, tmp)
-    return path
+    """Write ``state`` to ``<run_dir>/checkpoints/last.pt`` atomically, keeping the one
+    before as ``previous.pt``; return the path.
 
-
-def load_checkpoint(run_dir: str | os.PathLike, map_location: Any = "cpu") -> dict[str, Any]:
-    """Read ``<run_dir>/checkpoints/last.pt`` with ``weights_only=True``.
-
-    Raises:
-        RunError: the folder or checkpoint is missing or unreadable.
+    At every moment of a save ``last.pt`` is a complete checkpoint (the old one until the new
+    one replaces it in one rename); what a killed save leaves (``.*.tmp.pt``) is removed by
+    the next save or resume.
     """
     run_dir = Path(run_dir)
     path = run_dir / CHECKPOINT
+    remove_stale_temporaries(run_dir)
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
+        if path.is_file():  # last.pt stays in place until the new one replaces it
+            with atomic_path(run_dir / PREVIOUS) as keep:
+                keep.unlink()
+                try:
+                    os.link(path, keep)
+                except OSError:  # a file system without hard links
+                    shutil.copyfile(path, keep)
+    return path
+
+
+def remove_stale_temporaries(run_dir: str | os.PathLike) -> list[Path]:
+    """Delete what killed saves left in ``<run_dir>/checkpoints`` (``.*.tmp.pt``)."""
+    folder = Path(run_dir) / CHECKPOINT.parent
+    stale = sorted(folder.glob(".*.tmp.pt")) if folder.is_dir() else []
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
+
+
+def load_checkpoint(run_dir: str | os.PathLike, map_location: Any = "cpu") -> dict[str, Any]:
+    """Read ``<run_dir>/checkpoints/last.pt`` with ``weights_only=True``, or, when it is
+    missing or unreadable (a kill between the two renames of a save, a damaged disk),
+    ``previous.pt`` with a warning.
+
+    Raises:
+        RunError: the folder is missing, or no checkpoint in it is readable.
+    """
+    run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: run folder does not exist")
+    try:
+        return _read_checkpoint(run_dir / CHECKPOINT, map_location)
+    except RunError as exc:
+        if not (run_dir / PREVIOUS).is_file():
+            raise
+        state = _read_checkpoint(run_dir / PREVIOUS, map_location)
+        logging.getLogger("hybridneus").warning("%s; using %s (step %s)", exc,
+                                                run_dir / PREVIOUS, state.get("step"))
+        return state
+
+
+def _read_checkpoint(path: Path, map_location: Any) -> dict[str, Any]:
     if not path.is_file():
         raise RunError(f"{path}: checkpoint missing (the run was never saved)")
     try:

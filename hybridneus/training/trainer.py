@@ -257,16 +257,20 @@ class Trainer:
                     bar.update(task, completed=self.step, total=self.total_steps,
                                info=f"loss {logs['loss/total']:.4g} inv_s {logs['inv_s']:.0f} "
                                f"lv {int(logs['levels'])}")
-                    if not math.isfinite(logs["loss/total"]):
+                    if not math.isfinite(logs["loss/total"]) and not logs.get("rolled_back"):
                         raise RunError(f"training diverged at step {self.step} (loss "
-                                       f"{logs['loss/total']}); lower train.lr or check "
-                                       "data.threshold")
+                                       f"{logs['loss/total']}) after {_restores(self)} "
+                                       "roll-back(s); lower train.lr or check data.threshold")
             except KeyboardInterrupt:
                 self.interrupted = True
         if run is not None:
             run.finish(self)
         self.field.eval()
         return self.field
+
+
+def _restores(trainer) -> int:
+    return sum(int(getattr(p, "restores", 0)) for p in trainer.priors)
 
 
 def default_scene_name(path: str | Path) -> str:

@@ -15,11 +15,16 @@ it up again. A field that empties again before a new restore point goes back one
 further each time, down to the state the run started from. The batches after a restore are
 new draws, so the run does not replay its collapse. After ``retries`` restores it lets the
 run go on.
+
+A step whose loss is NaN or infinite (its update has already poisoned the parameters) goes
+back to the newest restore point the same way; once the retries are spent, the trainer
+stops with a message.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from typing import Any
 
 import torch
@@ -64,6 +69,15 @@ class CollapseGuard(Prior):
     def after_logs(self, trainer, logs: dict[str, float]) -> None:
         c = self.cfg
         logs["restores"] = float(self.restores)
+        if not math.isfinite(logs["loss/total"]):
+            # a step that produced a NaN or inf has already poisoned the parameters: go back
+            # to the newest restore point (the trainer stops once the retries are spent)
+            if self.restores < c.retries:
+                self._restore(trainer, self._points[-1],
+                              f"the loss became {logs['loss/total']}")
+                logs["restores"] = float(self.restores)
+                logs["rolled_back"] = 1.0
+            return
         self._opacity.append(logs["opacity"])
         if len(self._opacity) < c.window:
             return
@@ -81,20 +95,23 @@ class CollapseGuard(Prior):
             return
         if len(points) > 1:
             points.pop()
-        back_to, state = points[-1]
+        self._restore(trainer, points[-1],
+                      f"the field emptied (mean opacity {mean:.4f} over {c.window} steps)")
+        logs["restores"] = float(self.restores)
+
+    def _restore(self, trainer, point: tuple[int, dict[str, torch.Tensor]], why: str) -> None:
+        back_to, state = point
         trainer.field.load_state_dict(state)
         trainer.optimizer.state.clear()
         trainer.refresh_occupancy()
         self.restores += 1
-        self.scale *= c.lr_factor
+        self.scale *= self.cfg.lr_factor
         self.warm_from = trainer.step
         logging.getLogger("hybridneus").warning(
-            "step %d: the field emptied (mean opacity %.4f over %d steps); restored its state "
-            "of step %d with the learning rate x%g (restore %d of at most %d; "
-            "priors.collapse_guard)",
-            trainer.step, mean, c.window, back_to, self.scale, self.restores, c.retries,
+            "step %d: %s; restored its state of step %d with the learning rate x%g (restore "
+            "%d of at most %d; priors.collapse_guard)",
+            trainer.step, why, back_to, self.scale, self.restores, self.cfg.retries,
         )
-        logs["restores"] = float(self.restores)
 
     def state_dict(self) -> dict[str, Any]:
         return {"lr_scale": self.scale, "warm_from": self.warm_from, "restores": self.restores}
