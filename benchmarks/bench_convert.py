@@ -5,9 +5,9 @@ compression, AEDAT4, Prophesee EVT2/EVT3 RAW or DAT written by faery, a ROS 1 ba
 ``dvs_msgs/EventArray`` written by rosbags, text, or npz), a turntable description and a
 calibration into a temporary folder, then runs
 ``hybridneus convert`` on it in a fresh process and records its wall time, events per second
-and peak RSS (the child's ``ru_maxrss``). Convert streams the events twice, so peak memory
-should not grow with N; the result line states the size of the events as loaded by a fit
-(13 bytes per event) beside it.
+and peak RSS (the convert process's own ``ru_maxrss``). Convert streams the events twice,
+so peak memory should not grow with N; the result line states the size of the events as
+loaded by a fit (13 bytes per event) beside it.
 
 Usage::
 
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
 import tempfile
@@ -147,6 +146,19 @@ def write_recording(folder: Path, n: int, fmt: str, seed: int = 0) -> Path:
     return path
 
 
+#: The convert process reports its own peak RSS: RUSAGE_CHILDREN would also count the pages
+#: a forked child shares with this process, which holds the recording it just wrote.
+_CHILD = """
+import resource, sys
+from hybridneus.cli.app import main
+sys.argv = ["hybridneus", *sys.argv[1:]]
+try:
+    main()
+finally:
+    print("peak_rss_kb", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)
+"""
+
+
 def write_setup(folder: Path) -> tuple[Path, Path]:
     cam = np.eye(4)
     cam[:3, 3] = [0.0, 0.0, -0.5]
@@ -176,7 +188,7 @@ def main() -> None:
         print(f"wrote {n:,} events ({events.stat().st_size / 1e9:.2f} GB) in "
               f"{time.perf_counter() - made:.0f} s", flush=True)
         table, calib = write_setup(folder)
-        cmd = [sys.executable, "-m", "hybridneus.cli.app", "convert", str(events),
+        cmd = [sys.executable, "-c", _CHILD, "convert", str(events),
                str(folder / "out"), "--turntable", str(table), "--calib", str(calib),
                "--views", str(args.views), "-q"]
         start = time.perf_counter()
@@ -184,7 +196,7 @@ def main() -> None:
         seconds = time.perf_counter() - start
         if proc.returncode != 0:
             raise SystemExit(f"convert failed: {proc.stderr.strip()}")
-        peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        peak_mb = int(proc.stderr.strip().splitlines()[-1].split()[-1]) / 1024
         written = (folder / "out" / "train" / "events" / "events.npz").stat().st_size
     record = common.stamp(threads=None) | {
         "bench": "convert", "format": args.format, "events": n, "views": args.views,

@@ -209,8 +209,11 @@ def _read_member(
                         f"{path}: key '{key}' has shape {shape}, expected 1-D"
                     )
                 n = int(np.prod(shape))
-                held = zf.getinfo(f"{key}.npy").file_size
-                if n * dtype.itemsize > held:  # before allocating what the header claims
+                info = zf.getinfo(f"{key}.npy")
+                # before allocating what the header claims: no more than the member's size,
+                # which itself cannot exceed deflate's ~1032:1 ratio over the stored bytes
+                held = min(info.file_size, 1100 * info.compress_size + 4096)
+                if n * dtype.itemsize > held:
                     raise DatasetError(
                         f"{path}: key '{key}' claims {n:,} entries but holds {held:,} bytes")
                 out = np.empty(n, dtype=out_dtype)

@@ -50,6 +50,15 @@ def _seconds(t: np.ndarray, unit: str) -> np.ndarray:
     return t.astype(np.float64) * TIME_UNITS[unit]
 
 
+def _compiled_fault(exc: BaseException) -> bool:
+    """Whether ``exc`` is a compiled reader's failure on a bad file: any exception, or a
+    Rust panic (pyo3's ``PanicException`` derives from ``BaseException``), but not an
+    interrupt or a generator's close."""
+    if isinstance(exc, KeyboardInterrupt | SystemExit | GeneratorExit):
+        return False
+    return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
+
+
 class FaerySource(EventSource):
     """AEDAT4, Prophesee EVT2/EVT3 RAW, DAT and Event Stream files, decoded by faery."""
 
@@ -60,7 +69,9 @@ class FaerySource(EventSource):
         try:
             stream = faery.events_stream_from_file(path, track_id=track)
             self.size = tuple(int(v) for v in stream.dimensions())
-        except Exception as exc:  # faery raises plain RuntimeError/OSError on bad files
+        except BaseException as exc:  # faery: RuntimeError/OSError, or a Rust panic
+            if not _compiled_fault(exc):
+                raise
             raise RecordingError(f"{path}: cannot read as {self.format} ({first_line(exc)})") \
                 from None
         self._faery = faery
@@ -69,8 +80,8 @@ class FaerySource(EventSource):
         self.note = f"{self.format}, {self.size[0]}x{self.size[1]} from the header, t in us"
 
     def chunks(self) -> Iterator[EventChunk]:
-        stream = self._faery.events_stream_from_file(self.path, track_id=self._track)
         try:
+            stream = self._faery.events_stream_from_file(self.path, track_id=self._track)
             for packet in stream:
                 if len(packet) == 0:
                     continue
@@ -78,9 +89,15 @@ class FaerySource(EventSource):
                                  packet["y"].astype(np.int32), packet["on"].astype(bool))
         except RecordingError:
             raise
-        except Exception as exc:
+        except BaseException as exc:
+            if not _compiled_fault(exc):
+                raise
             raise RecordingError(f"{self.path}: {self.format} decoding failed "
                                  f"({first_line(exc)})") from None
+
+
+#: What h5py raises on a damaged file (besides its OSError for unreadable chunks).
+_H5_FAULTS = (OSError, KeyError, RuntimeError, ValueError, TypeError, IndexError)
 
 
 class HDF5Source(EventSource):
@@ -97,6 +114,14 @@ class HDF5Source(EventSource):
             self._file = h5py.File(path, "r")
         except OSError as exc:
             raise RecordingError(f"{path}: cannot open as HDF5 ({first_line(exc)})") from None
+        try:
+            self._layout(h5py, path, time_unit)
+        except RecordingError:
+            raise
+        except _H5_FAULTS as exc:
+            raise RecordingError(f"{path}: damaged HDF5 file ({first_line(exc)})") from None
+
+    def _layout(self, h5py, path: Path, time_unit: str | None) -> None:
         f = self._file
         if "CD" in f and "events" in f["CD"]:
             raise RecordingError(
@@ -132,7 +157,7 @@ class HDF5Source(EventSource):
                 t = t_col[s:e].astype(np.int64) + self._offset if t_col.dtype.kind in "iu" \
                     else t_col[s:e].astype(np.float64) + self._offset
                 x, y, p = x_col[s:e], y_col[s:e], p_col[s:e]
-            except OSError as exc:
+            except _H5_FAULTS as exc:
                 raise RecordingError(
                     f"{self.path}: cannot decode events {s}..{e} ({first_line(exc)}; a "
                     "compression filter hdf5plugin lacks?)") from None
@@ -188,8 +213,12 @@ class TextSource(EventSource):
                 body = b"".join(line for line in lines if not line.lstrip().startswith(b"#"))
                 for sep in (b",", b";", b"\t"):
                     body = body.replace(sep, b" ")
-                values = np.array(body.split(), dtype=np.float64) if body.strip() else \
-                    np.zeros(0)
+                try:
+                    values = np.array(body.split(), dtype=np.float64) if body.strip() else \
+                        np.zeros(0)
+                except ValueError:
+                    raise RecordingError(f"{self.path}: lines {start + 1}..{lineno} hold a "
+                                         "value that is not a number") from None
                 if values.size % self._ncols:
                     raise RecordingError(
                         f"{self.path}: lines {start + 1}..{lineno} do not all have "
