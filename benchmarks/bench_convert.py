@@ -5,9 +5,9 @@ compression, AEDAT4, Prophesee EVT2/EVT3 RAW or DAT written by faery, a ROS 1 ba
 ``dvs_msgs/EventArray`` written by rosbags, text, or npz), a turntable description and a
 calibration into a temporary folder, then runs
 ``hybridneus convert`` on it in a fresh process and records its wall time, events per second
-and peak RSS (the convert process's own ``ru_maxrss``). Convert streams the events twice,
-so peak memory should not grow with N; the result line states the size of the events as
-loaded by a fit (13 bytes per event) beside it.
+and peak RSS (the convert process's own high-water mark, ``VmHWM``). Convert streams the
+events twice, so peak memory should not grow with N; the result line states the size of the
+events as loaded by a fit (13 bytes per event) beside it.
 
 Usage::
 
@@ -146,8 +146,10 @@ def write_recording(folder: Path, n: int, fmt: str, seed: int = 0) -> Path:
     return path
 
 
-#: The convert process reports its own peak RSS: RUSAGE_CHILDREN would also count the pages
-#: a forked child shares with this process, which holds the recording it just wrote.
+#: The convert process reports its own peak RSS: VmHWM of its own memory map. Not
+#: RUSAGE_CHILDREN, nor even the child's RUSAGE_SELF: Linux keeps ru_maxrss across exec, so
+#: both count the pages the forked child shared with this process, which holds the
+#: recording it just wrote.
 _CHILD = """
 import resource, sys
 from hybridneus.cli.app import main
@@ -155,7 +157,11 @@ sys.argv = ["hybridneus", *sys.argv[1:]]
 try:
     main()
 finally:
-    print("peak_rss_kb", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)
+    try:
+        status = open("/proc/self/status").read().split("VmHWM:")[1].split()[0]
+    except (OSError, IndexError):
+        status = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    print("peak_rss_kb", status, file=sys.stderr)
 """
 
 
