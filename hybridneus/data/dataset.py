@@ -195,7 +195,9 @@ def _read_pose_matrices(pose_files: list[Path]) -> np.ndarray:
     return c2w
 
 
-def _read_views(split_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+def _read_views(
+    split_dir: Path,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str], list[Path]]:
     pose_files = _list_files(split_dir / "pose", ".txt")
     intr_files = _list_files(split_dir / "intrinsics", ".txt")
     if not pose_files:
@@ -219,7 +221,7 @@ def _read_views(split_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, li
             dist[i] = m[4, :2]
     check_poses(c2w, pose_files)
     check_intrinsics(K, dist, intr_files)
-    return c2w, K, dist, [f.stem for f in pose_files]
+    return c2w, K, dist, [f.stem for f in pose_files], intr_files
 
 
 def _find_splits(root: Path) -> dict[str, Path]:
@@ -275,7 +277,7 @@ def load_split(
     for sub in _REQUIRED:
         if not (split_dir / sub).is_dir():
             raise DatasetError(f"{split_dir / sub}: missing folder")
-    c2w, K, dist, names = _read_views(split_dir)
+    c2w, K, dist, names, intr_files = _read_views(split_dir)
     rgb_paths: list[Path] | None = None
     if (split_dir / "rgb").is_dir():
         rgb_paths = _list_files(split_dir / "rgb", None)
@@ -296,7 +298,7 @@ def load_split(
             f"({listed})"
         )
     _check_resolution(K, width, height, split_dir, notes)
-    check_camera(K, dist, _list_files(split_dir / "intrinsics", ".txt"), width, height)
+    check_camera(K, dist, intr_files, width, height)
     radius = float(np.linalg.norm(c2w[:, :3, 3], axis=1).max())
     if radius > 1.0:
         msg = (

@@ -94,7 +94,7 @@ class BagSource(EventSource):
                         parts.append(chunk)
                         held += len(chunk)
                     if held >= CHUNK:
-                        yield _concat(parts)
+                        yield EventChunk.concatenate(parts)
                         parts, held = [], 0
         except RecordingError:
             raise
@@ -102,7 +102,7 @@ class BagSource(EventSource):
             raise RecordingError(f"{self.path}: reading the bag failed ({first_line(exc)})") \
                 from None
         if parts:
-            yield _concat(parts)
+            yield EventChunk.concatenate(parts)
 
 
 class _EventArrayLayout:
@@ -168,11 +168,6 @@ class _EventArrayLayout:
 
 def _align(offset: int, size: int) -> int:
     return (offset + size - 1) // size * size
-
-
-def _concat(parts: list[EventChunk]) -> EventChunk:
-    return EventChunk(*(np.concatenate([getattr(p, k) for p in parts])
-                        for k in ("t", "x", "y", "on")))
 
 
 __all__ = ["BAG_SUFFIXES", "BagSource", "EVENT_MSG_TYPES"]

@@ -15,13 +15,13 @@ Lens models follow OpenCV: ``radtan`` is ``cv2.undistortPoints``' (k1, k2, p1, p
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hybridneus.errors import RecordingError
+from hybridneus.recordings.documents import parse_mapping, read_text
 
 MODELS = ("pinhole", "radtan", "equidistant")
 _MODEL_NAMES = {
@@ -99,24 +99,10 @@ def read_calibration(path: str | Path, camera: str | None = None) -> Calibration
 
 
 def _load(path: Path) -> dict:
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RecordingError(f"{path}: cannot read ({exc})") from None
+    text = read_text(path)
     if text.lstrip().startswith("%YAML"):
         return _opencv_storage(path)
-    try:
-        if path.suffix.lower() == ".json":
-            doc = json.loads(text)
-        else:
-            import yaml
-
-            doc = yaml.safe_load(text)
-    except Exception as exc:  # json.JSONDecodeError or yaml.YAMLError
-        raise RecordingError(f"{path}: cannot parse ({str(exc).splitlines()[0]})") from None
-    if not isinstance(doc, dict):
-        raise RecordingError(f"{path}: expected a mapping at the top level")
-    return doc
+    return parse_mapping(path, text)
 
 
 def _opencv_storage(path: Path) -> dict:

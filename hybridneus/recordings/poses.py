@@ -10,7 +10,6 @@ interpolated with scipy's ``Slerp``, positions linearly.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from hybridneus.errors import RecordingError
+from hybridneus.recordings.documents import read_mapping
 
 #: OpenGL camera axes (x right, y up, z backward) to OpenCV's (x right, y down, z forward).
 GL_TO_CV = np.diag([1.0, -1.0, -1.0])
@@ -286,7 +286,7 @@ def read_turntable(path: str | Path) -> Turntable:
     camera-to-table pose at angle 0 as a 4x4 matrix (OpenCV axes; ``camera_axes: opengl``
     for OpenGL's)."""
     path = Path(path)
-    doc = _read_mapping(path)
+    doc = read_mapping(path)
     try:
         axis = np.asarray(doc["axis"], dtype=np.float64).reshape(3)
         camera = np.asarray(doc["camera"], dtype=np.float64).reshape(4, 4)
@@ -313,32 +313,13 @@ def read_turntable(path: str | Path) -> Turntable:
                      source=str(path))
 
 
-def _read_mapping(path: Path) -> dict:
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RecordingError(f"{path}: cannot read ({exc})") from None
-    try:
-        if path.suffix.lower() == ".json":
-            doc = json.loads(text)
-        else:
-            import yaml
-
-            doc = yaml.safe_load(text)
-    except Exception as exc:  # json.JSONDecodeError or yaml.YAMLError
-        raise RecordingError(f"{path}: cannot parse ({str(exc).splitlines()[0]})") from None
-    if not isinstance(doc, dict):
-        raise RecordingError(f"{path}: expected a mapping at the top level")
-    return doc
-
-
 def read_matrix(text: str, what: str) -> np.ndarray:
     """A 4x4 rigid transform from a file (16 or 12 numbers, or JSON/YAML with a
     ``T``/``matrix`` entry) or from 16 or 12 comma-separated numbers."""
     path = Path(text)
     if path.exists():
         if path.suffix.lower() in (".json", ".yaml", ".yml"):
-            doc = _read_mapping(path)
+            doc = read_mapping(path)
             values = next((doc[k] for k in ("T", "matrix", "T_body_cam", "T_cam_body")
                            if k in doc), None)
             if values is None:

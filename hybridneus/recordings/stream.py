@@ -45,6 +45,12 @@ class EventChunk:
         """The events where ``keep`` (bool mask or index array) says so."""
         return EventChunk(self.t[keep], self.x[keep], self.y[keep], self.on[keep])
 
+    @classmethod
+    def concatenate(cls, chunks: list[EventChunk]) -> EventChunk:
+        """One chunk of ``chunks`` (non-empty list) in order."""
+        columns = ("t", "x", "y", "on")
+        return cls(*(np.concatenate([getattr(c, k) for c in chunks]) for k in columns))
+
 
 def need(module: str, path: Path, what: str):
     """Import an optional reader, or fail with the extra that installs it."""
