@@ -153,6 +153,10 @@ def prepare(
         _fix_budget(trainer, logger, started + 60.0 * cfg.train.minutes)
     if logger is not None:
         logger.start(trainer)
+        if not (logger.run_dir / runs.CHECKPOINT).is_file():
+            # A step-0 checkpoint: a run killed before its first scheduled save can still
+            # be resumed, without loading and estimating again.
+            logger.checkpoint(trainer)
         log.info("run: %s (config.yaml, %s)", logger.run_dir, FILENAME)
     for line in record.lines():
         log.info(line)

@@ -90,3 +90,41 @@ def test_a_run_that_keeps_diverging_stops_after_its_roll_backs(scene, tmp_path, 
     with pytest.raises(RunError, match=r"diverged at step \d+ \(loss nan\) after 3 roll-back"):
         fit(scene, tiny("train.iters=30"), out=tmp_path / "runs", device="cpu")
     assert not (tmp_path / "runs" / runs.LATEST).exists()
+
+
+def _blow_up_from(monkeypatch, step: int, every: bool):
+    """Multiply the event term by 10^6 at ``step`` (and after, when ``every``): finite."""
+    from hybridneus.training.objective import Objective
+
+    original = Objective.__call__
+    hits: list[int] = []
+
+    def blown(self, ctx, batch, eps):
+        terms = original(self, ctx, batch, eps)
+        if ctx.p >= step / 16 and (every or not hits):
+            hits.append(ctx.p)
+            weight, value = terms["event"]
+            terms["event"] = (weight, value * 1e6)
+        return terms
+
+    monkeypatch.setattr(Objective, "__call__", blown)
+    return hits
+
+
+def test_an_exploding_finite_loss_rolls_back_then_stops(scene, tmp_path, monkeypatch, caplog):
+    hits = _blow_up_from(monkeypatch, 10, every=False)
+    cfg = tiny("train.iters=16", "priors.collapse_guard.window=5")
+    with caplog.at_level("WARNING", logger="hybridneus"):
+        field = fit(scene, cfg, out=tmp_path / "a", device="cpu")
+    assert len(hits) == 1 and field.trainer_step == 16
+    assert "step 11: the loss jumped to" in caplog.text and "x the median of the 5 steps " \
+        "before; restored its state of step" in caplog.text
+    monkeypatch.undo()
+    _blow_up_from(monkeypatch, 10, every=True)
+    with pytest.raises(RunError, match=r"diverged at step \d+ \(loss [0-9.e+]+\) after 3 "):
+        fit(scene, cfg, out=tmp_path / "b", device="cpu")
+    monkeypatch.undo()
+    off = tiny("train.iters=16", "priors.collapse_guard.window=5",
+               "priors.collapse_guard.explode=0")
+    _blow_up_from(monkeypatch, 10, every=False)
+    assert fit(scene, off, out=tmp_path / "c", device="cpu").trainer_step == 16

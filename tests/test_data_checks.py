@@ -187,3 +187,28 @@ def test_a_checkpoint_without_its_scene_record_is_refused_by_name(tiny_scene, tm
     code, _, err = run_cli("mesh", str(copy), "--res", "16", "--out", str(tmp_path / "m.ply"))
     assert code == 2 and "last.pt: checkpoint lacks scene" in err and err.count("\n") == 1
     assert not (tmp_path / "m.ply").exists()
+
+
+def test_events_with_x_and_y_exchanged_are_reported(tmp_path, caplog):
+    from hybridneus.config import DataConfig, EstimateConfig
+    from hybridneus.data.estimate import estimate_scene
+    from hybridneus.data.orientation import transposed_events
+    from hybridneus.simulate import SimulationConfig, simulate_dataset
+
+    # a small object in a 48x36 image: its events fit the sensor either way round
+    cfg = SimulationConfig(n_views=24, width=48, height=36, val_views=0, test_views=0,
+                           revolutions=1.0, supersample=1, object_radius=0.2)
+    simulate_dataset("builtin:device", tmp_path / "s", cfg)
+    events = next((tmp_path / "s" / "train" / "events").glob("*.npz"))
+    assert transposed_events(load_dataset(tmp_path / "s")["train"]) is None
+    with np.load(events) as z:
+        cols = {k: z[k] for k in z.files}
+    assert cols["x"].max() < 36 and cols["y"].max() < 48
+    cols["x"], cols["y"] = cols["y"], cols["x"]
+    np.savez(events, **cols)
+    dataset = load_dataset(tmp_path / "s")  # in range: no reader check can see it
+    with caplog.at_level("WARNING", logger="hybridneus"):
+        estimate_scene(dataset, EstimateConfig(), DataConfig())
+    assert "with x and y exchanged they would match: are the file's x and y columns " \
+           "swapped?" in caplog.text
+    assert str(events) in caplog.text

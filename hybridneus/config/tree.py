@@ -260,7 +260,9 @@ class CollapseGuard:
     Assumes the object fills part of most views: a mean rendered opacity below ``opacity``
     over ``window`` steps means the surface has gone (an early overshoot, pushed back by the
     crop and hull terms), and nothing would bring it back. The guard then reloads the last
-    healthy state with a lower learning rate. Costs a copy of the field every ``window``
+    healthy state with a lower learning rate, as it does after a step whose loss is NaN,
+    infinite or ``explode`` times the median of the window before (fits' own spikes stay
+    under 5x). Costs a copy of the field every ``window``
     steps (12 MiB for ``fast``). Switch it off for scenes that really are nearly empty in
     every view.
     """
@@ -271,6 +273,7 @@ class CollapseGuard:
     retries: int = 3  # restores before the run goes on as it is
     healthy: float = 0.1  # a window's mean opacity from this on makes a restore point
     lr_factor: float = 0.5  # learning-rate multiplier after each restore
+    explode: float = 100.0  # a loss this many times the last window's median diverged (0: off)
 
 
 @dataclass

@@ -91,6 +91,11 @@ def estimate_scene(
             f"{ev.path}: every event has polarity {'+1' if ev.n_positive else '-1'} (stored as "
             f"{ev.polarity_note}); a recording holds both, and a fit needs both (a polarity "
             "column of another convention, or a filtered file?)")
+    from hybridneus.data.orientation import transposed_events
+
+    transposed = transposed_events(split)
+    if transposed is not None:
+        found.warnings.append(transposed)
     if cfg.polarity_offset and data.polarity_offset is None:
         _polarity_offset(found, split)
     if cfg.crop and all(getattr(data, k) is None for k in CROP_KEYS):

@@ -64,6 +64,8 @@ def new_run_dir(runs_root: str | os.PathLike, scene: str) -> Path:
 def set_latest(runs_root: str | os.PathLike, run_dir: str | os.PathLike) -> None:
     """Point ``<runs_root>/latest`` at ``run_dir`` (a text file with the folder name)."""
     root = Path(runs_root)
+    for stale in root.glob(f".{LATEST}.*.tmp"):  # a pointer write that was killed
+        stale.unlink(missing_ok=True)
     with atomic_path(root / LATEST, suffix="") as tmp:
         tmp.write_text(Path(run_dir).name + "\n")
 
@@ -110,10 +112,20 @@ def save_checkpoint(run_dir: str | os.PathLike, state: dict[str, Any]) -> Path:
     return path
 
 
+#: Where a run writes files atomically (``fileio.atomic_path`` names its temporaries
+#: ``.<stem>.<random>.tmp<suffix>``): the folder itself (config, scene record, metrics),
+#: its checkpoints and its previews.
+_ATOMIC_FOLDERS = (Path("."), CHECKPOINT.parent, Path("previews"))
+
+
 def remove_stale_temporaries(run_dir: str | os.PathLike) -> list[Path]:
-    """Delete what killed saves left in ``<run_dir>/checkpoints`` (``.*.tmp.pt``)."""
-    folder = Path(run_dir) / CHECKPOINT.parent
-    stale = sorted(folder.glob(".*.tmp.pt")) if folder.is_dir() else []
+    """Delete what killed writes left in a run folder (``.*.tmp*`` beside the checkpoints,
+    the metrics, the scene record and the previews)."""
+    stale: list[Path] = []
+    for sub in _ATOMIC_FOLDERS:
+        folder = Path(run_dir) / sub
+        if folder.is_dir():
+            stale += sorted(p for p in folder.glob(".*.tmp*") if p.is_file())
     for p in stale:
         p.unlink(missing_ok=True)
     return stale

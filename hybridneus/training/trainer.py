@@ -257,9 +257,10 @@ class Trainer:
                     bar.update(task, completed=self.step, total=self.total_steps,
                                info=f"loss {logs['loss/total']:.4g} inv_s {logs['inv_s']:.0f} "
                                f"lv {int(logs['levels'])}")
-                    if not math.isfinite(logs["loss/total"]) and not logs.get("rolled_back"):
+                    diverged = logs.get("diverged") or not math.isfinite(logs["loss/total"])
+                    if diverged and not logs.get("rolled_back"):
                         raise RunError(f"training diverged at step {self.step} (loss "
-                                       f"{logs['loss/total']}) after {_restores(self)} "
+                                       f"{logs['loss/total']:.4g}) after {_restores(self)} "
                                        "roll-back(s); lower train.lr or check data.threshold")
             except KeyboardInterrupt:
                 self.interrupted = True

@@ -16,15 +16,18 @@ further each time, down to the state the run started from. The batches after a r
 new draws, so the run does not replay its collapse. After ``retries`` restores it lets the
 run go on.
 
-A step whose loss is NaN or infinite (its update has already poisoned the parameters) goes
-back to the newest restore point the same way; once the retries are spent, the trainer
-stops with a message.
+A step whose loss is NaN or infinite (its update has already poisoned the parameters), or
+``explode`` times the median loss of the ``window`` steps before it (a finite blow-up: a
+learning rate far too high, a threshold far too low), goes back to the newest restore point
+the same way; once the retries are spent, the trainer stops with a message.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import statistics
+from collections import deque
 from typing import Any
 
 import torch
@@ -57,6 +60,7 @@ class CollapseGuard(Prior):
         self.warm_from = 0
         self.restores = 0
         self._opacity: list[float] = []
+        self._losses: deque[float] = deque(maxlen=max(cfg.window, 1))
         self._points: list[tuple[int, dict[str, torch.Tensor]]] = [(0, _copy(field))]
 
     def lr_scale(self, trainer) -> float:
@@ -69,15 +73,19 @@ class CollapseGuard(Prior):
     def after_logs(self, trainer, logs: dict[str, float]) -> None:
         c = self.cfg
         logs["restores"] = float(self.restores)
-        if not math.isfinite(logs["loss/total"]):
-            # a step that produced a NaN or inf has already poisoned the parameters: go back
-            # to the newest restore point (the trainer stops once the retries are spent)
+        diverged = self._diverged(logs["loss/total"])
+        if diverged:
+            # a step that produced a NaN, an inf or a blow-up has already poisoned the
+            # parameters: go back to the newest restore point (the trainer stops once the
+            # retries are spent)
+            logs["diverged"] = 1.0
             if self.restores < c.retries:
-                self._restore(trainer, self._points[-1],
-                              f"the loss became {logs['loss/total']}")
+                # the window before stays the yardstick: a blow-up that comes back is caught
+                self._restore(trainer, self._points[-1], diverged)
                 logs["restores"] = float(self.restores)
                 logs["rolled_back"] = 1.0
             return
+        self._losses.append(logs["loss/total"])
         self._opacity.append(logs["opacity"])
         if len(self._opacity) < c.window:
             return
@@ -98,6 +106,18 @@ class CollapseGuard(Prior):
         self._restore(trainer, points[-1],
                       f"the field emptied (mean opacity {mean:.4f} over {c.window} steps)")
         logs["restores"] = float(self.restores)
+
+    def _diverged(self, loss: float) -> str | None:
+        """Why the step's loss counts as diverged, or ``None``."""
+        if not math.isfinite(loss):
+            return f"the loss became {loss}"
+        explode = self.cfg.explode
+        if explode > 0 and len(self._losses) == self._losses.maxlen:
+            median = statistics.median(self._losses)
+            if median > 0 and loss > explode * median:
+                return (f"the loss jumped to {loss:.4g}, {loss / median:.0f}x the median of "
+                        f"the {len(self._losses)} steps before")
+        return None
 
     def _restore(self, trainer, point: tuple[int, dict[str, torch.Tensor]], why: str) -> None:
         back_to, state = point
@@ -123,6 +143,7 @@ class CollapseGuard(Prior):
         self.warm_from = int(state.get("warm_from", 0))
         self.restores = int(state.get("restores", 0))
         self._opacity = []
+        self._losses.clear()
         self._points = [(int(state.get("step", 0)), _copy(self.field))]
 
 
