@@ -124,7 +124,7 @@ def write_recording(folder: Path, n: int, fmt: str, seed: int = 0) -> Path:
         path = folder / "events.h5"
         with h5py.File(path, "w") as f:
             g = f.create_group("events")
-            cols = {k: g.create_dataset(k, shape=(n,), dtype=d, chunks=(1 << 18,),
+            cols = {k: g.create_dataset(k, shape=(n,), dtype=d, chunks=(min(n, 1 << 18),),
                                         **hdf5plugin.Blosc())
                     for k, d in (("t", np.int64), ("x", np.uint16), ("y", np.uint16),
                                  ("p", np.uint8))}

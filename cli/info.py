@@ -31,9 +31,12 @@ def info(
     from hybridneus.data import load_dataset
 
     cfg = config_with(preset, set_)
-    # The findings are printed below; keep the logging copies of them off the terminal.
-    logging.getLogger("hybridneus").setLevel(logging.ERROR)
+    # What loading warns about (an unknown preset key, ...) is shown; the estimators'
+    # findings are printed below, so their logging copies are kept off the terminal.
+    logger = logging.getLogger("hybridneus")
+    logger.setLevel(logging.WARNING)
     ds = load_dataset(data, overrides=cfg.data.overrides() or None, splits=split or None)
+    logger.setLevel(logging.ERROR)
     report = dataset_report(ds, cfg)
     if as_json:
         typer.echo(json.dumps(report, indent=2))

@@ -16,7 +16,11 @@ def mesh(
     color: Annotated[
         bool, typer.Option("--color/--no-color", help="Attach vertex colours.")
     ] = False,
-    format: Annotated[str, typer.Option("--format", help="ply, obj or glb.")] = "ply",
+    format: Annotated[
+        str | None,
+        typer.Option("--format", help="ply, obj or glb. Default: --out's suffix, else ply.",
+                     show_default=False),
+    ] = None,
     out: Annotated[
         Path | None, typer.Option("--out", help="Output file (default <run>/mesh_<res>.<fmt>).")
     ] = None,
@@ -101,16 +105,26 @@ def mesh(
     from hybridneus.meshing.render import save_preview
     from hybridneus.training.runs import latest_run, load_cameras, load_checkpoint, load_field
 
-    fmt = format.lower()
+    suffix = Path(out).suffix.lstrip(".").lower() if out is not None else ""
+    fmt = (format or suffix or "ply").lower()
     if fmt not in MESH_FORMATS:
-        raise ConfigError(f"--format {format}: expected one of {', '.join(MESH_FORMATS)}")
+        what = f"--format {format}" if format else f"--out {out}"
+        raise ConfigError(f"{what}: expected one of {', '.join(MESH_FORMATS)}")
+    if out is not None and suffix != fmt:
+        raise ConfigError(f"--out {out}: a mesh in {fmt} format needs the suffix .{fmt}")
     if frame not in ("recording", "normalised"):
         raise ConfigError(f"--frame {frame}: expected recording or normalised")
     if res < 8 or res > 2048:
         raise ConfigError(f"--res {res}: expected 8 .. 2048")
+    if chunk < 1:
+        raise ConfigError(f"--chunk {chunk}: expected >= 1")
     if decimate < 0 or min_component < 0 or min_component_faces < 0 or component_gap < 0:
         raise ConfigError(
             "--decimate/--min-component/--component-gap/--min-component-faces must be >= 0")
+    if out is not None:
+        from hybridneus.fileio import check_output
+
+        check_output(out)  # before minutes of meshing, not after
     run_dir = Path(run) if run is not None else latest_run(runs_root)
     if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
         run_dir = latest_run(run_dir)  # a runs root was given: use its latest run

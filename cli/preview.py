@@ -39,7 +39,7 @@ def preview(
 
     if background not in ("white", "black"):
         raise ConfigError(f"--background: expected 'white' or 'black', got {background!r}")
-    logging.getLogger("hybridneus.data").setLevel(logging.ERROR)
+    logging.getLogger("hybridneus.data").setLevel(logging.WARNING)  # notes off, warnings on
     cfg = config_with("fast", set_)
     ds = load_dataset(data, overrides=cfg.data.overrides() or None, splits=[split])
     sp = ds.splits[split]

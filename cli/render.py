@@ -186,9 +186,11 @@ def render(
     run_dir = Path(run) if run is not None else latest_run(runs_root)
     if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
         run_dir = latest_run(run_dir)
+    from hybridneus.errors import DatasetError
+    from hybridneus.fileio import check_output
+
+    out_dir = check_output(Path(out) if out is not None else run_dir / "render", folder=True)
     field = load_field(run_dir, device=device)
-    out_dir = Path(out) if out is not None else run_dir / "render"
-    out_dir.mkdir(parents=True, exist_ok=True)
 
     kinds = ("test", "orbit", "events") if views == "all" else (views,)
     dataset = None
@@ -196,6 +198,10 @@ def render(
         cfg = load_run_config(run_dir)
         path = data if data is not None else Path(cfg.data.path)
         dataset = load_dataset(path, overrides=cfg.data.overrides() or None)
+        if "test" in kinds and split not in dataset.splits:
+            raise DatasetError(f"{dataset.root}: no split {split!r} to render (it has "
+                               f"{', '.join(dataset.splits)})")
+    out_dir.mkdir(parents=True, exist_ok=True)  # only once the inputs are known good
     if "test" in kinds:
         summary = _render_test_views(field, dataset, split, out_dir, max_views, stride)
         if "mean_psnr" in summary:

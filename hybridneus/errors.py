@@ -29,3 +29,8 @@ class RunError(HybridNeusError, ValueError):
 
 class RecordingError(HybridNeusError, ValueError):
     """A recording, pose track or calibration file cannot be read or does not fit together."""
+
+
+class OutputError(HybridNeusError, OSError):
+    """An output path cannot be written (a folder where a file is wanted, a file in its
+    path, no permission)."""

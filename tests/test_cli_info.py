@@ -137,3 +137,12 @@ def test_info_subprocess_end_to_end(scene):
     )
     assert res.returncode == 2
     assert res.stderr.strip() == f"error: {scene / 'nope'}: dataset folder does not exist"
+
+
+def test_info_shows_what_loading_warns_about(run_cli, scene, caplog):
+    # (on a terminal the warning reaches stderr; under pytest its log handler takes it)
+    (scene / "scene.json").write_text(json.dumps({"preset": {"nosuch": 1, "threshold": 0.2}}))
+    with caplog.at_level("WARNING"):
+        code, out, err = run_cli("info", str(scene), *SIZE_ARGS)
+    assert code == 0, err
+    assert "ignoring unknown preset key 'nosuch'" in caplog.text

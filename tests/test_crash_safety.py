@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import pytest
 import torch
@@ -128,3 +129,33 @@ def test_an_exploding_finite_loss_rolls_back_then_stops(scene, tmp_path, monkeyp
                "priors.collapse_guard.explode=0")
     _blow_up_from(monkeypatch, 10, every=False)
     assert fit(scene, off, out=tmp_path / "c", device="cpu").trainer_step == 16
+
+
+def test_temporaries_of_killed_writers_go_and_running_ones_stay(tmp_path):
+    import subprocess
+    import sys
+
+    from hybridneus.fileio import atomic_path
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True).stdout.strip()
+    dead = tmp_path / f".mesh.{gone}-abc.tmp.ply"
+    alive = tmp_path / f".mesh.{os.getpid()}-def.tmp.ply"
+    other = tmp_path / f".other.{gone}-abc.tmp.ply"
+    for p in (dead, alive, other):
+        p.write_bytes(b"half")
+    with atomic_path(tmp_path / "mesh.ply") as tmp:
+        tmp.write_text("whole")
+    assert not dead.exists() and alive.exists() and other.exists()
+    assert (tmp_path / "mesh.ply").read_text() == "whole"
+
+
+def test_a_resume_removes_what_killed_writes_left_in_the_run(scene, tmp_path):
+    first = fit(scene, tiny("train.iters=2"), out=tmp_path / "runs", device="cpu")
+    run = first.run_dir
+    left = [run / ".metrics.1-x.tmp.csv", run / ".scene.1-x.tmp.yaml",
+            run / "checkpoints" / ".last.1-x.tmp.pt"]
+    for p in left:
+        p.write_bytes(b"cut")
+    fit(None, None, overrides=["train.iters=3"], resume=run, device="cpu")
+    assert not [p for p in left if p.exists()]

@@ -184,6 +184,7 @@ def test_a_checkpoint_without_its_scene_record_is_refused_by_name(tiny_scene, tm
     state = torch.load(path, weights_only=True)
     del state["scene"]
     torch.save(state, path)
+    (copy / "checkpoints" / "previous.pt").unlink()  # else the older one is read instead
     code, _, err = run_cli("mesh", str(copy), "--res", "16", "--out", str(tmp_path / "m.ply"))
     assert code == 2 and "last.pt: checkpoint lacks scene" in err and err.count("\n") == 1
     assert not (tmp_path / "m.ply").exists()
@@ -212,3 +213,26 @@ def test_events_with_x_and_y_exchanged_are_reported(tmp_path, caplog):
     assert "with x and y exchanged they would match: are the file's x and y columns " \
            "swapped?" in caplog.text
     assert str(events) in caplog.text
+
+
+def test_every_rgb_frame_is_checked_not_only_the_first(tmp_path):
+    from PIL import Image
+
+    write_split(tmp_path / "s" / "train", n_views=4)
+    _rgb_frames(tmp_path / "s" / "train", W, H)
+    Image.new("RGB", (W + 2, H)).save(tmp_path / "s" / "train" / "rgb" / "r_00002.png")
+    with pytest.raises(DatasetError, match=r"r_00002.png: frame is 26x16, but the rgb frames "
+                                           r"\(.*r_00000.png\) states 24x16"):
+        load_dataset(tmp_path / "s")
+
+
+@pytest.mark.parametrize("sub, message", [
+    ("pose", "view r_00002 is in intrinsics/ but not in pose/"),
+    ("intrinsics", "view r_00002 is in pose/ but not in intrinsics/"),
+    ("rgb", "view r_00002 is in pose/ but not in rgb/"),
+])
+def test_a_view_lost_from_one_folder_is_named(tmp_path, sub, message):
+    write_split(tmp_path / "s" / "train", n_views=4)
+    next((tmp_path / "s" / "train" / sub).glob("r_00002.*")).unlink()
+    with pytest.raises(DatasetError, match=f"view counts differ .*: {message}"):
+        load_dataset(tmp_path / "s", overrides=SIZE)

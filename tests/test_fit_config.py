@@ -92,6 +92,12 @@ def test_bad_overrides_raise_one_line_errors(item, message):
         ("grid.domain=sphere", "grid.domain: expected crop or volume"),
         ("field.color_activation=tanh", "field.color_activation: expected relu or softplus"),
         ("field.color_grid_levels=-1", "field.color_grid_levels: expected >= 0"),
+        ("render.n_coarse=0", "render.n_coarse: expected >= 1"),
+        ("render.chunk=0", "render.chunk: expected >= 1"),
+        ("render.occupancy_resolution=1", "render.occupancy_resolution: expected >= 2"),
+        ("grid.n_levels=0", "grid.n_levels: expected >= 1"),
+        ("train.seed=-1", "train.seed: expected in [0, 2^32)"),
+        ("priors.collapse_guard.explode=0.5", "priors.collapse_guard.explode: expected > 1"),
     ],
 )
 def test_values_out_of_range_are_config_errors(item, message):
@@ -165,3 +171,16 @@ def test_cli_bad_config_exits_2_with_one_line(tmp_path):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: train.lr: expected a number")
+
+
+def test_checking_the_runs_folder_creates_nothing(tmp_path):
+    from hybridneus.errors import RunError
+    from hybridneus.training.runs import check_runs_root
+
+    check_runs_root(tmp_path / "a" / "runs")  # a fit failing on its data leaves no folder
+    assert not (tmp_path / "a").exists()
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(RunError, match="file/runs: cannot create the runs folder"):
+        check_runs_root(tmp_path / "file" / "runs")
+    with pytest.raises(RunError, match="not a folder"):
+        check_runs_root(tmp_path / "file")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -105,3 +107,23 @@ def test_mesh_fills_unseen_space_from_the_runs_cameras_unless_told_not_to(
     expected = load_cameras(latest_run(runs))
     assert seen[0] is not None and np.allclose(seen[0], expected)
     assert seen[1] is None and seen[2] is None
+
+
+def test_mesh_checks_its_output_before_meshing(runs, tmp_path, cli):
+    (tmp_path / "folder.ply").mkdir()
+    (tmp_path / "file").write_text("x")
+    for out, message in [(tmp_path / "folder.ply", "folder.ply: is a folder; give a file name"),
+                         (tmp_path / "file" / "m.ply", "m.ply: cannot be created, "),
+                         (tmp_path / "m.xyz", "--out .*m.xyz: expected one of ply"),
+                         (tmp_path / "m.ply", None)]:
+        extra = ["--format", "obj"] if message is None else []
+        code, err = cli(str(runs), "--res", "16", "--out", str(out), "--no-preview", *extra)
+        assert code == 2 and err.count("\n") == 1, err
+        assert re.search(message or r"a mesh in obj format needs the suffix \.obj", err)
+    code, err = cli(str(runs), "--res", "16", "--chunk", "0")
+    assert code == 2 and "--chunk 0: expected >= 1" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "folder.ply"]
+    code, err = cli(str(runs), "--res", "16", "--out", str(tmp_path / "m.obj"), "--no-preview",
+                    "--no-postprocess", "--device", "cpu")
+    assert code == 0, err  # the format follows the suffix
+    assert (tmp_path / "m.obj").read_text().startswith(("#", "v ", "o "))

@@ -520,3 +520,30 @@ def test_a_colmap_model_gives_the_same_poses_as_the_tum_track(recording, tmp_pat
     times.write_text("\n".join(rows[1:]) + "\n")
     with pytest.raises(RecordingError, match="no time for 1 of the model's images"):
         read_colmap_track(tmp_path / "bin", times)
+
+
+def test_a_conversion_keeps_out_of_folders_it_did_not_write(recording, tmp_path, run_cli):
+    root = recording["root"]
+    events = _write(recording, "npz")
+    args = [str(events), str(tmp_path / "out"), "--poses", str(root / "poses.txt"), "--calib",
+            str(root / "calib.json"), "--clock-offset", str(OFFSET), "-q"]
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "notes.txt").write_text("mine")
+    code, _, err = run_cli("convert", *args)
+    assert code == 2 and "out: holds files a conversion did not write (notes.txt)" in err
+    assert (tmp_path / "out" / "notes.txt").read_text() == "mine"
+    (tmp_path / "out" / "notes.txt").unlink()
+    assert run_cli("convert", *args)[0] == 0  # an empty folder, then its own output
+    assert run_cli("convert", *args)[0] == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["scene.json", "train"]
+
+
+def test_empty_files_and_misshapen_turntables_are_named(tmp_path):
+    for name in ("e.raw", "e.aedat4", "e.h5", "e.txt", "e.bag"):
+        (tmp_path / name).write_bytes(b"")
+        with pytest.raises(RecordingError, match=f"{name}: empty file"):
+            open_events(tmp_path / name)
+    (tmp_path / "t.json").write_text(json.dumps({"axis": [0, 1, 0], "speed_deg_s": 6,
+                                                 "camera": [[1, 0], [0, 1]]}))
+    with pytest.raises(RecordingError, match=r"t.json: turntable camera must be a 4x4 matrix"):
+        read_turntable(tmp_path / "t.json")

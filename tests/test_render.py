@@ -83,3 +83,15 @@ def test_predicted_event_frame_records_the_training_target(scene):
     assert predicted.shape == recorded.shape == (H, W)
     np.testing.assert_allclose(recorded, expected, rtol=1e-6)
     assert np.isfinite(predicted).all()
+
+
+def test_render_refuses_a_missing_split_before_making_its_folder(scene, run_cli, tmp_path):
+    out = tmp_path / "r"
+    code, _, err = run_cli("render", "--runs-root", str(scene / "runs"), "--views", "test",
+                           "--split", "nosuch", "--out", str(out), "--device", "cpu")
+    assert code == 2 and "no split 'nosuch' to render" in err
+    assert not out.exists()
+    (tmp_path / "file").write_text("x")
+    code, _, err = run_cli("render", "--runs-root", str(scene / "runs"), "--out",
+                           str(tmp_path / "file"), "--device", "cpu")
+    assert code == 2 and "file: is a file; give a folder name" in err

@@ -89,12 +89,21 @@ def check_view_names(folders: dict[str, list[str]], split_dir: Path) -> None:
     """Views are paired by file stem: every folder must hold the same stems."""
     (first, names), *rest = folders.items()
     for other, theirs in rest:
-        if theirs != names:
-            missing = sorted(set(names) ^ set(theirs))
-            where = (f"{missing[0]} is in only one of {first}/ and {other}/" if missing else
-                     f"{first}/ and {other}/ order their files differently")
-            raise DatasetError(f"{split_dir}: view names differ: {where} (views are paired "
-                               "by file name)")
+        if theirs == names:
+            continue
+        only_first, only_other = sorted(set(names) - set(theirs)), sorted(set(theirs) - set(names))
+        if len(names) != len(theirs) and (only_first or only_other):
+            # a file lost from one folder: say which view it was
+            view, has, lacks = ((only_first[0], first, other) if only_first else
+                                (only_other[0], other, first))
+            raise DatasetError(f"{split_dir}: view counts differ ({first}/ has {len(names)} "
+                               f"files, {other}/ has {len(theirs)}): view {view} is in {has}/ "
+                               f"but not in {lacks}/")
+        missing = only_first + only_other
+        where = (f"{missing[0]} is in only one of {first}/ and {other}/" if missing else
+                 f"{first}/ and {other}/ order their files differently")
+        raise DatasetError(f"{split_dir}: view names differ: {where} (views are paired "
+                           "by file name)")
 
 
 __all__ = ["check_camera", "check_intrinsics", "check_poses", "check_view_names"]

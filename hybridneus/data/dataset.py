@@ -202,11 +202,6 @@ def _read_views(
     intr_files = _list_files(split_dir / "intrinsics", ".txt")
     if not pose_files:
         raise DatasetError(f"{split_dir / 'pose'}: no .txt pose files")
-    if len(pose_files) != len(intr_files):
-        raise DatasetError(
-            f"{split_dir}: view counts differ: pose/ has {len(pose_files)} files, "
-            f"intrinsics/ has {len(intr_files)}"
-        )
     check_view_names({"pose": [f.stem for f in pose_files],
                       "intrinsics": [f.stem for f in intr_files]}, split_dir)
     n = len(pose_files)
@@ -283,11 +278,6 @@ def load_split(
         rgb_paths = _list_files(split_dir / "rgb", None)
         if not rgb_paths:
             rgb_paths = None
-        elif len(rgb_paths) != len(names):
-            raise DatasetError(
-                f"{split_dir}: view counts differ: pose/ has {len(names)} files, "
-                f"rgb/ has {len(rgb_paths)}"
-            )
         else:
             check_view_names({"pose": names, "rgb": [p.stem for p in rgb_paths]}, split_dir)
     npz = _list_files(split_dir / "events", ".npz")

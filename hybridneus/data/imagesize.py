@@ -15,22 +15,29 @@ import numpy as np
 from hybridneus.errors import DatasetError
 
 
-def rgb_size(split_dir: Path) -> tuple[tuple[int, int], Path] | None:
-    """((width, height), file) of the first rgb frame of a split, or None without readable
-    frames (a fit does not read them; whatever reads them later names a bad one)."""
+def _frame_sizes(split_dir: Path):
+    """(file, (width, height)) of each readable rgb frame of a split, from its header only
+    (unreadable frames are skipped: a fit does not read them; whatever reads them later
+    names a bad one)."""
     from PIL import Image, UnidentifiedImageError
 
     folder = split_dir / "rgb"
     if not folder.is_dir():
-        return None
-    files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
-    if not files:
-        return None
-    try:
-        with Image.open(files[0]) as img:
-            return (int(img.size[0]), int(img.size[1])), files[0]
-    except (OSError, UnidentifiedImageError):
-        return None
+        return
+    for path in sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")):
+        try:
+            with Image.open(path) as img:
+                size = (int(img.size[0]), int(img.size[1]))
+        except (OSError, UnidentifiedImageError):
+            continue
+        yield path, size
+
+
+def rgb_size(split_dir: Path) -> tuple[tuple[int, int], Path] | None:
+    """((width, height), file) of the first readable rgb frame of a split, or None."""
+    for path, size in _frame_sizes(split_dir):
+        return size, path
+    return None
 
 
 def principal_point_size(K: np.ndarray, default: tuple[int, int]) -> tuple[int, int] | None:
@@ -45,10 +52,10 @@ def principal_point_size(K: np.ndarray, default: tuple[int, int]) -> tuple[int, 
 
 def check_rgb_size(split_dir: Path, width: int, height: int, source: str) -> None:
     """Refuse rgb frames of another size than the one stated."""
-    found = rgb_size(split_dir)
-    if found is not None and found[0] != (width, height):
-        (w, h), path = found
-        raise DatasetError(f"{path}: frame is {w}x{h}, but {source} states {width}x{height}")
+    for path, (w, h) in _frame_sizes(split_dir):
+        if (w, h) != (width, height):
+            raise DatasetError(f"{path}: frame is {w}x{h}, but {source} states "
+                               f"{width}x{height}")
 
 
 def _first_K(split_dir: Path, n: int = 16) -> np.ndarray | None:

@@ -255,6 +255,33 @@ def _write_events(source: EventSource, track: PoseTrack, scan: Scan, times: np.n
     return n_pos
 
 
+#: What a conversion writes in its output folder (``check/``: ``convert --check``'s pictures).
+WRITTEN = frozenset({"scene.json", "train", "check"})
+
+
+def check_replaceable(out: Path) -> None:
+    """Refuse an output folder that a conversion would replace but did not write: the
+    folder is replaced whole, so other files in it would be lost.
+
+    Raises:
+        RecordingError: ``out`` is a file, or a folder holding other files.
+    """
+    from hybridneus.errors import OutputError
+    from hybridneus.fileio import check_output
+
+    try:
+        check_output(out, folder=True)
+    except OutputError as exc:
+        raise RecordingError(str(exc)) from None
+    if not out.is_dir():
+        return
+    names = sorted(p.name for p in out.iterdir())
+    if names and not (set(names) <= WRITTEN and (out / "scene.json").is_file()):
+        raise RecordingError(f"{out}: holds files a conversion did not write ("
+                             f"{', '.join(names[:3])}{', ...' if len(names) > 3 else ''}); the "
+                             "folder is replaced whole, so give a new or empty one")
+
+
 def convert_recording(
     source: EventSource,
     track: PoseTrack,
@@ -276,6 +303,7 @@ def convert_recording(
 
     options.check()
     out = Path(out)
+    check_replaceable(out)
     size = _sensor_size(source, calib)
     if calib is None:
         raise RecordingError(f"{source.path}: a calibration is needed (--calib) for the "

@@ -333,6 +333,8 @@ def open_events(
             return BagSource(path, topic=topic)
         raise RecordingError(f"{path}: a folder without a ROS 2 bag's metadata.yaml, "
                              "expected an event file")
+    if path.stat().st_size == 0:  # some readers take nothing for a default header
+        raise RecordingError(f"{path}: empty file (0 bytes)")
     if suffix in BAG_SUFFIXES:
         return BagSource(path, topic=topic)
     if suffix in FAERY_SUFFIXES:

@@ -287,18 +287,22 @@ def read_turntable(path: str | Path) -> Turntable:
     for OpenGL's)."""
     path = Path(path)
     doc = read_mapping(path)
-    try:
-        axis = np.asarray(doc["axis"], dtype=np.float64).reshape(3)
-        camera = np.asarray(doc["camera"], dtype=np.float64).reshape(4, 4)
-        speed = float(doc["speed_deg_s"])
-        center = np.asarray(doc.get("center", [0, 0, 0]), dtype=np.float64).reshape(3)
-        start = float(doc.get("start_deg", 0.0))
-        t0 = float(doc.get("t0", 0.0))
-    except KeyError as exc:
-        raise RecordingError(f"{path}: turntable needs {exc.args[0]!r} (axis, speed_deg_s, "
-                             "camera)") from None
-    except (TypeError, ValueError) as exc:
-        raise RecordingError(f"{path}: turntable values of the wrong shape ({exc})") from None
+    def value(key: str, shape: tuple[int, ...], default=None) -> np.ndarray:
+        if key not in doc and default is None:
+            raise RecordingError(f"{path}: turntable needs {key!r} (axis, speed_deg_s, "
+                                 "camera)")
+        try:
+            return np.asarray(doc.get(key, default), dtype=np.float64).reshape(shape)
+        except (TypeError, ValueError):
+            what = (f"a {shape[0]}x{shape[1]} matrix" if len(shape) == 2 else
+                    f"{shape[0]} numbers" if shape else "a number")
+            raise RecordingError(f"{path}: turntable {key} must be {what}, got "
+                                 f"{doc.get(key)!r}") from None
+
+    axis, camera = value("axis", (3,)), value("camera", (4, 4))
+    speed = float(value("speed_deg_s", ()))
+    center = value("center", (3,), [0, 0, 0])
+    start, t0 = float(value("start_deg", (), 0.0)), float(value("t0", (), 0.0))
     if not (np.isfinite(axis).all() and np.isfinite(camera).all() and np.isfinite(speed)):
         raise RecordingError(f"{path}: turntable values are not all finite")
     if np.linalg.norm(axis) < 1e-9 or speed == 0:

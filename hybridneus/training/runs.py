@@ -40,10 +40,14 @@ def check_runs_root(runs_root: str | os.PathLike) -> None:
     root = Path(runs_root)
     if root.exists() and not root.is_dir():
         raise RunError(f"{root}: not a folder (--out must name a folder for the runs)")
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RunError(f"{root}: cannot create the runs folder ({exc.strerror})") from None
+    # nothing is created yet: a fit that fails on its data leaves no empty folder behind
+    parent = root.absolute()
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise RunError(f"{root}: cannot create the runs folder ({parent} is a file)")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise RunError(f"{root}: cannot create the runs folder ({parent} is not writable)")
 
 
 def new_run_dir(runs_root: str | os.PathLike, scene: str) -> Path:
