@@ -377,6 +377,23 @@ def recordings_section(rows: list[dict]) -> list[str]:
     return out + ["", "  \n".join(commands), ""]
 
 
+def reliability_section(rows: list[dict]) -> list[str]:
+    """reliability.py: bad inputs and faults tried as commands (its latest clean line)."""
+    if not rows:
+        return []
+    r = rows[-1]
+    return ["## Reliability: bad inputs and faults", "",
+            "Every case of `benchmarks/reliability_cases.py` run as the command a person would "
+            "type; the full table, with the message each case shows, is "
+            "[docs/reliability.md](reliability.md). Target: 0 tracebacks, 0 silent accepts, "
+            "0 leftovers over at least 150 cases.", "",
+            "| cases | ok | tracebacks | silent accepts | unclear | leftovers | wrong | seconds "
+            "| commit | machine | date |", "|---|---|---|---|---|---|---|---|---|---|---|",
+            f"| {r['cases']} | {r['ok']} | {r['traceback']} | {r['silent']} | {r['unclear']} | "
+            f"{r['leftover']} | {r['wrong']} | {r['seconds']:.0f} | {r['commit']} | {_cpu(r)} | "
+            f"{r['date'][:10]} |", "", f"Command: `{r['command']}`", ""]
+
+
 def speed_section(results: dict[str, list[dict]]) -> list[str]:
     """The latest clean line of each speed benchmark's measurements."""
     out = ["## Speed", "", "The latest line of each measurement; timings are medians, and "
@@ -471,6 +488,7 @@ def build(compare: list[tuple[str, str]]) -> str:
     out += suite_section(suite)
     out += cleanup_section(suite)
     out += recordings_section(results.get("recordings", []))
+    out += reliability_section(results.get("reliability", []))
     out += speed_section(results)
     return "\n".join(out).rstrip() + "\n"
 
