@@ -33,6 +33,7 @@ from hybridneus.config.tree import (
     HullPrior,
     LossConfig,
     PriorsConfig,
+    RefineConfig,
     RenderConfig,
     SharpnessCeiling,
     SharpnessFloor,
@@ -43,8 +44,8 @@ from hybridneus.config.tree import (
 __all__ = [
     "LEGACY_KEYS", "N_RAYS_BY_DEVICE", "PRESETS", "CollapseGuard", "Config", "CurvaturePrior",
     "DataConfig", "EstimateConfig", "FieldConfig", "GridConfig", "HullPrior", "LossConfig",
-    "PriorsConfig", "RenderConfig", "SharpnessCeiling", "SharpnessFloor", "TrainConfig",
-    "apply_overrides",
+    "PriorsConfig", "RefineConfig", "RenderConfig", "SharpnessCeiling", "SharpnessFloor",
+    "TrainConfig", "apply_overrides",
     "config_from_dict", "config_markdown", "config_table", "load_config", "preset_config",
     "rays_per_step", "save_config", "set_value", "validate",
 ]

@@ -91,6 +91,9 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("priors.collapse_guard.retries", lambda v: v >= 0, ">= 0"),
     ("priors.collapse_guard.lr_factor", lambda v: 0 < v <= 1, "in (0, 1]"),
     ("priors.collapse_guard.explode", lambda v: v == 0 or v > 1, "> 1 (0: off)"),
+    ("refine.pose_lr", lambda v: v > 0, "> 0"),
+    ("refine.pose_start", _fraction, "a fraction of training in [0, 1]"),
+    ("refine.pose_weight", lambda v: v >= 0, ">= 0"),
 ]
 
 

@@ -289,6 +289,17 @@ class PriorsConfig:
 
 
 @dataclass
+class RefineConfig:
+    """What a capture states imperfectly, learned with the field (docs/training.md,
+    "Refinement"). Off by default: on exact poses it can only cost accuracy and time."""
+
+    poses: bool = False  # learn a rotation and a translation correction per training view
+    pose_lr: float = 0.0005  # Adam learning rate of the corrections (radians, world units)
+    pose_start: float = 0.1  # fraction of training before which the corrections stay zero
+    pose_weight: float = 0.01  # weight of the corrections' mean square (keeps them small)
+
+
+@dataclass
 class Config:
     """The full training configuration (what ``config.yaml`` in a run folder holds)."""
 
@@ -301,6 +312,7 @@ class Config:
     data: DataConfig = dataclasses.field(default_factory=DataConfig)
     estimate: EstimateConfig = dataclasses.field(default_factory=EstimateConfig)
     priors: PriorsConfig = dataclasses.field(default_factory=PriorsConfig)
+    refine: RefineConfig = dataclasses.field(default_factory=RefineConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict of primitives (YAML- and ``weights_only``-safe)."""

@@ -164,6 +164,9 @@ class RayBatch:
         view1: view index of ``t1`` (an integer value).
         t0: window start as a fraction of ``T`` (wrapped into [0, 1]).
         t1: window end as a fraction of ``T``.
+        rot0: (3, 3) float32 camera-to-world rotation at ``t0`` (a pose correction turns
+            the rays about it), or None.
+        rot1: (3, 3) float32 camera-to-world rotation at ``t1``, or None.
     """
 
     origins0: torch.Tensor
@@ -177,6 +180,8 @@ class RayBatch:
     view1: float
     t0: float = 0.0
     t1: float = 0.0
+    rot0: torch.Tensor | None = None
+    rot1: torch.Tensor | None = None
 
     def to(self, device: str | torch.device) -> RayBatch:
         """Copy of the batch with every tensor on ``device``."""
@@ -328,4 +333,6 @@ class EventWindowSampler:
             view1=float(i),
             t0=t0_wrapped / self.t_max,
             t1=t1 / self.t_max,
+            rot0=torch.as_tensor(c2w0[:3, :3], dtype=torch.float32, device=self.device),
+            rot1=torch.as_tensor(sp.c2w[i][:3, :3], dtype=torch.float32, device=self.device),
         )

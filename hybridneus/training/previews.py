@@ -155,6 +155,22 @@ def write_curve(history: list[dict[str, float]], path: Path, size=(480, 400)) ->
     _write_png(path, img)
 
 
+def write_pose_corrections(degrees: np.ndarray, moved: np.ndarray, path: Path,
+                           size=(480, 300)) -> None:
+    """Each view's learned pose correction as a PNG: above, its rotation (degrees); below,
+    how far it moved the camera centre (world units), both against the view index."""
+    w, h = size
+    img = np.full((h, w, 3), 255, np.uint8)
+    pad, mid = 30, h // 2
+    views = np.arange(len(degrees), dtype=np.float64)
+    _panel(img, (pad, pad, w - pad, mid - pad // 2),
+           [("rotation (deg)", (200, 60, 0), np.column_stack([views, degrees]), False)])
+    _panel(img, (pad, mid + pad // 2, w - pad, h - pad),
+           [("centre moved", (0, 120, 0), np.column_stack([views, moved]), False)])
+    cv2.putText(img, "view", (w - 60, h - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 0), 1)
+    _write_png(path, img)
+
+
 def _write_png(path: Path, img: np.ndarray) -> None:
     path = Path(path)
     with atomic_path(path) as tmp:

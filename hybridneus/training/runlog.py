@@ -14,6 +14,8 @@ from hybridneus.config import save_config
 from hybridneus.fileio import atomic_path
 from hybridneus.training import runs
 
+#: The refined training poses of a ``refine.poses`` run (see :meth:`RunLogger.save_poses`).
+POSES = "poses_refined.npz"
 _FIXED = ["step", "elapsed_s", "loss/total", "loss/event", "loss/eikonal"]
 
 
@@ -115,6 +117,22 @@ class RunLogger:
         self._saved_at = time.perf_counter()
         return path
 
+    def save_poses(self, trainer, refined) -> None:
+        """``poses_refined.npz`` (``given`` and ``refined`` (n_views, 4, 4) camera-to-world,
+        ``views``: the view names) and ``previews/poses.png``, the size of each view's
+        correction."""
+        import numpy as np
+
+        from hybridneus.model.poses import pose_errors
+        from hybridneus.training.previews import write_pose_corrections
+
+        given = np.asarray(trainer.split.c2w, dtype=np.float64)
+        with atomic_path(self.run_dir / POSES) as tmp:
+            np.savez(tmp, given=given, refined=refined,
+                     views=np.asarray(trainer.split.view_names))
+        degrees, moved = pose_errors(refined, given)
+        write_pose_corrections(degrees, moved, self.run_dir / "previews" / "poses.png")
+
     def preview(self, trainer) -> None:
         """Write ``previews/step_<n>.png`` and ``previews/curve.png``."""
         from hybridneus.training.previews import write_curve, write_preview
@@ -129,6 +147,9 @@ class RunLogger:
         from hybridneus.training.scene import FILENAME
 
         self.checkpoint(trainer)
+        refined = trainer.refined_poses()
+        if refined is not None:
+            self.save_poses(trainer, refined)
         if trainer.stopped_early:
             trainer.record.stopped_at = trainer.step
         trainer.record.save(self.run_dir / FILENAME)

@@ -33,7 +33,8 @@ def trainer_state(trainer) -> dict[str, Any]:
         "frame_rng": None if trainer.frames is None
         else _primitive(trainer.frames.rng.bit_generator.state),
         "priors": {p.name: p.state_dict() for p in trainer.priors},
-        "scene": dict(trainer.scene),
+        "poses": None if trainer.poses is None else trainer.poses.delta.detach().cpu().clone(),
+        "scene": _scene(trainer),
         "config": trainer.cfg.to_dict(),
     }
 
@@ -58,6 +59,9 @@ def load_trainer_state(trainer, state: dict[str, Any]) -> None:
     trainer.windows.rng.bit_generator.state = state["window_rng"]
     if trainer.frames is not None and state.get("frame_rng") is not None:
         trainer.frames.rng.bit_generator.state = state["frame_rng"]
+    if trainer.poses is not None and state.get("poses") is not None:
+        with torch.no_grad():
+            trainer.poses.delta.copy_(state["poses"])
     trainer.step = int(state["step"])
     trainer.total_steps = int(state["total_steps"])
     trainer.elapsed = float(state.get("elapsed", 0.0))
@@ -65,6 +69,15 @@ def load_trainer_state(trainer, state: dict[str, Any]) -> None:
     for prior in trainer.priors:
         prior.load_state_dict({**saved.get(prior.name, {}), "step": trainer.step})
     trainer.field.update_step(trainer.step, trainer.total_steps)
+
+
+def _scene(trainer) -> dict[str, Any]:
+    """The scene record; with refined poses, meshing's camera centres are the refined ones."""
+    scene = dict(trainer.scene)
+    refined = trainer.refined_poses()
+    if refined is not None:
+        scene["cameras"] = refined[:, :3, 3].astype(float).tolist()
+    return scene
 
 
 def _primitive(value: Any) -> Any:

@@ -119,6 +119,14 @@ class Trainer:
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
         self.optimizer = make_optimizer(self.field, cfg)
         self.base_lrs = [cfg.train.lr, cfg.train.lr_variance]
+        self.poses = None  # refine.poses: per-view corrections learned with the field
+        if cfg.refine.poses:
+            from hybridneus.model.poses import PoseCorrections
+
+            self.poses = PoseCorrections(self.split.n_views).to(self.device)
+            self.optimizer.add_param_group({"params": [self.poses.delta], "lr": 0.0,
+                                            "name": "poses"})
+            self.base_lrs.append(cfg.refine.pose_lr)
         self.params = [q for g in self.optimizer.param_groups for q in g["params"]]
         self.priors = build_priors(cfg, self.field, self.split, self.aabb, self.device)
         self.objective = Objective(cfg.loss, self.priors, self.aabb)
@@ -169,7 +177,10 @@ class Trainer:
         for prior in self.priors:
             factor *= prior.lr_scale(self)
         for group, base in zip(self.optimizer.param_groups, self.base_lrs, strict=True):
-            group["lr"] = base * factor
+            # the poses wait until the field has settled: early corrections would chase a
+            # field that is still mostly noise
+            on = group.get("name") != "poses" or p_end > self.cfg.refine.pose_start
+            group["lr"] = base * factor if on else 0.0
         return factor
 
     def train_step(self) -> dict[str, float]:
@@ -184,11 +195,15 @@ class Trainer:
         if self.step % max(cfg.render.occupancy_every, 1) == 0:
             self.refresh_occupancy()
         batch = self.next_batch()
+        if self.poses is not None and isinstance(batch, RayBatch):
+            batch = self._corrected(batch)
         origins, dirs = batch_rays(batch)
         out = render_rays(self.field, origins, dirs, self.sampler, self.generator, True,
                           cfg.render.crop_softness)
         ctx = StepContext(self.field, out, origins, dirs, p, self.generator, batch)
         terms = self.objective(ctx, batch, self.tonemap_eps())
+        if self.poses is not None:
+            terms["pose"] = (cfg.refine.pose_weight, self.poses.regulariser())
         total = sum(weight * value for weight, value in terms.values())
         self.optimizer.zero_grad(set_to_none=True)
         # Only the trained parameters: the sample points are leaves that require grad (for
@@ -213,6 +228,18 @@ class Trainer:
         logs.update({"lr": cfg.train.lr * factor, "levels": float(self.field.active_levels()),
                      "occupied": self.occupied_fraction, "step_seconds": seconds})
         return logs
+
+    def _corrected(self, batch: RayBatch) -> RayBatch:
+        """The batch's rays moved onto the corrected poses (differentiably)."""
+        import dataclasses
+
+        o0, d0 = self.poses.move_rays(batch.origins0, batch.dirs0, batch.rot0, batch.view0)
+        o1, d1 = self.poses.move_rays(batch.origins1, batch.dirs1, batch.rot1, batch.view1)
+        return dataclasses.replace(batch, origins0=o0, dirs0=d0, origins1=o1, dirs1=d1)
+
+    def refined_poses(self):
+        """(n_views, 4, 4) training poses with the learned corrections, or ``None``."""
+        return None if self.poses is None else self.poses.corrected(self.split.c2w)
 
     # ------------------------------------------------------------------ loop
 

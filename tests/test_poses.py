@@ -1,0 +1,142 @@
+"""Pose refinement: the exponential map, moving rays onto corrected poses, recovering known
+pose errors, and a fit that learns, saves and resumes its corrections."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from fitting import tiny
+from scipy.spatial.transform import Rotation
+
+from hybridneus.data.rays import camera_rays
+from hybridneus.model.poses import PoseCorrections, pose_errors, so3_exp
+
+
+@pytest.mark.parametrize("scale", [1e-9, 1e-5, 1e-3, 0.3, 3.0])
+def test_the_exponential_map_matches_scipy(scale):
+    w = np.random.default_rng(0).normal(size=(64, 3)) * scale
+    ours = so3_exp(torch.as_tensor(w)).numpy()
+    np.testing.assert_allclose(ours, Rotation.from_rotvec(w).as_matrix(), atol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e-6, 0.5, 2.0])
+def test_the_exponential_maps_gradient_matches_finite_differences(scale):
+    w = torch.as_tensor(np.random.default_rng(1).normal(size=(3, 3)) * scale,
+                        dtype=torch.float64).requires_grad_()
+    assert torch.autograd.gradcheck(so3_exp, (w,), eps=1e-7, atol=1e-6)
+
+
+def _look_at(centre: np.ndarray) -> np.ndarray:
+    forward = -centre / np.linalg.norm(centre)
+    right = np.cross([0.0, -1.0, 0.0], forward)
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    c2w = np.eye(4)
+    c2w[:3, :3] = np.stack([right, down, forward], axis=1)
+    c2w[:3, 3] = centre
+    return c2w
+
+
+def _errors(n: int, rot_deg: float, move: float, seed: int) -> np.ndarray:
+    """(n, 4, 4) camera-frame pose errors of ``rot_deg`` and ``move`` (world units)."""
+    rng = np.random.default_rng(seed)
+    e = np.tile(np.eye(4), (n, 1, 1))
+    axes = rng.normal(size=(n, 3))
+    e[:, :3, :3] = Rotation.from_rotvec(
+        np.radians(rot_deg) * axes / np.linalg.norm(axes, axis=1, keepdims=True)).as_matrix()
+    e[:, :3, 3] = rng.normal(size=(n, 3)) * move / np.sqrt(3)
+    return e
+
+
+def test_moved_rays_are_the_rays_of_the_corrected_pose():
+    K = np.array([[20.0, 0, 8], [0, 20.0, 6], [0, 0, 1]])
+    c2w = _look_at(np.array([0.3, 0.5, 2.0]))
+    xy = np.stack(np.meshgrid(np.arange(16), np.arange(12)), -1).reshape(-1, 2)
+    poses = PoseCorrections(3).double()
+    with torch.no_grad():
+        poses.delta[1] = torch.tensor([0.01, -0.02, 0.03, 0.05, -0.01, 0.02])
+    o, d = camera_rays(K, None, c2w, xy)
+    moved = poses.move_rays(o.double(), d.double(), torch.as_tensor(c2w[:3, :3]), 1.0)
+    o2, d2 = camera_rays(K, None, poses.corrected(np.stack([c2w] * 3))[1], xy)
+    np.testing.assert_allclose(moved[0].detach().numpy(), o2.numpy(), atol=1e-5)
+    np.testing.assert_allclose(moved[1].detach().numpy(), d2.numpy(), atol=1e-5)
+    half = poses.at(0.5)  # between views the correction is interpolated
+    assert torch.allclose(half, 0.5 * poses.delta[1])
+
+
+def _sphere_colours(o: torch.Tensor, d: torch.Tensor, radius: float = 0.6) -> torch.Tensor:
+    """Colour where rays meet a sphere at the origin, a smooth pattern of the hit point."""
+    b = (o * d).sum(-1)
+    c = (o * o).sum(-1) - radius**2
+    t = -b - torch.sqrt((b * b - c).clamp_min(1e-9))
+    p = o + t[:, None] * d
+    return torch.stack([torch.sin(3 * p[:, 0]), torch.cos(2 * p[:, 1] + p[:, 2]),
+                        torch.sin(2 * p[:, 2] - p[:, 0])], -1)
+
+
+def test_known_pose_errors_are_recovered_against_a_fixed_scene():
+    K = np.array([[40.0, 0, 16], [0, 40.0, 16], [0, 0, 1]])
+    angles = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    truth = np.stack([_look_at(np.array([2.2 * np.sin(a), 0.4, 2.2 * np.cos(a)]))
+                      for a in angles])
+    given = truth @ np.linalg.inv(_errors(6, 1.0, 0.03, seed=3))
+    xy = np.stack(np.meshgrid(np.arange(0, 32, 2), np.arange(0, 32, 2)), -1).reshape(-1, 2)
+    rays = [camera_rays(K, None, g, xy) for g in given]
+    targets = [_sphere_colours(*camera_rays(K, None, t, xy)) for t in truth]
+    poses = PoseCorrections(6)
+    opt = torch.optim.Adam(poses.parameters(), lr=2e-3)
+    for _ in range(400):
+        loss = sum(((_sphere_colours(*poses.move_rays(o, d, torch.as_tensor(g[:3, :3],
+                                                                          dtype=torch.float32),
+                                                      float(i))) - tgt) ** 2).mean()
+                   for i, ((o, d), g, tgt) in enumerate(zip(rays, given, targets, strict=True)))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    deg_before, moved_before = pose_errors(given, truth)
+    deg_after, moved_after = pose_errors(poses.corrected(given), truth)
+    assert deg_before.mean() > 0.9 and deg_after.max() < 0.1, deg_after
+    assert moved_after.max() < 0.2 * moved_before.mean(), (moved_before, moved_after)
+
+
+def test_a_fit_learns_saves_and_resumes_its_pose_corrections(scene, tmp_path):
+    import cv2
+
+    from hybridneus.api import fit
+    from hybridneus.training import runs
+    from hybridneus.training.runlog import POSES
+
+    cfg = tiny("train.iters=12", "refine.poses=true", "refine.pose_start=0.25",
+               "refine.pose_lr=0.01", "train.seed=3")
+    straight = fit(scene, cfg, out=tmp_path / "a", device="cpu")
+    state = runs.load_checkpoint(straight.run_dir)
+    delta = state["poses"]
+    assert delta.shape == (40, 6) and delta.abs().max() > 0  # learned after the start
+    saved = np.load(straight.run_dir / POSES)
+    assert saved["refined"].shape == (40, 4, 4) and len(saved["views"]) == 40
+    assert not np.allclose(saved["refined"], saved["given"])
+    np.testing.assert_allclose(state["scene"]["cameras"], saved["refined"][:, :3, 3])
+    assert cv2.imread(str(straight.run_dir / "previews" / "poses.png")) is not None
+    rows = (straight.run_dir / "metrics.csv").read_text().splitlines()
+    assert "loss/pose" in rows[0]
+
+    from fitting import stop_at
+
+    first = fit(scene, cfg, [stop_at(6)], out=tmp_path / "b", device="cpu")
+    resumed = fit(None, None, resume=first.run_dir, device="cpu")
+    again = runs.load_checkpoint(resumed.run_dir)
+    assert torch.equal(again["poses"], delta)
+    for k, v in state["model"].items():
+        assert torch.equal(v, again["model"][k]), k
+
+
+def test_before_its_start_the_correction_stays_zero(scene, tmp_path):
+    from hybridneus.api import fit
+    from hybridneus.training import runs
+
+    from fitting import stop_at
+
+    cfg = tiny("train.iters=10", "refine.poses=true", "refine.pose_start=0.5")
+    done = fit(scene, cfg, [stop_at(5)], out=tmp_path, device="cpu")
+    assert runs.load_checkpoint(done.run_dir)["poses"].abs().max() == 0
