@@ -132,10 +132,10 @@ def test_a_fit_learns_saves_and_resumes_its_pose_corrections(scene, tmp_path):
 
 
 def test_before_its_start_the_correction_stays_zero(scene, tmp_path):
+    from fitting import stop_at
+
     from hybridneus.api import fit
     from hybridneus.training import runs
-
-    from fitting import stop_at
 
     cfg = tiny("train.iters=10", "refine.poses=true", "refine.pose_start=0.5")
     done = fit(scene, cfg, [stop_at(5)], out=tmp_path, device="cpu")
