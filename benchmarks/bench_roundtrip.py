@@ -110,14 +110,16 @@ def write_recording(dataset: Path, out: Path) -> dict:
             "box": np.concatenate([box.min(0), box.max(0)])}
 
 
-def fit(args, name: str, dataset: Path) -> Path:
-    """Fit with the suite's child job (fixed steps); the run folder."""
+def fit(args, name: str, dataset: Path, sets: tuple[str, ...] = ()) -> Path:
+    """Fit with the suite's child job (fixed steps, config overrides ``sets``); the run
+    folder."""
     cmd = [sys.executable, str(Path(__file__).with_name("run_suite.py")), "_job",
            "--scene", name, "--dataset", str(dataset), "--preset", args.preset,
            "--minutes", "0", "--iters", str(args.iters), "--threads", str(args.threads),
            "--device", "cpu", "--res", str(args.res), "--curve", "1", "--image-views", "0",
            "--out-runs", str(args.cache / "roundtrip-runs"), "--noise", "[0, 0]",
-           "--fit-only", "--set", f"train.seed={args.seed}"]
+           "--fit-only", "--set", f"train.seed={args.seed}",
+           *[a for v in sets for a in ("--set", v)]]
     print(f"[roundtrip] fitting {name}: {args.preset}, {args.iters} steps", file=sys.stderr,
           flush=True)
     proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=True)

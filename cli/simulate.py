@@ -66,6 +66,14 @@ def simulate(
         help="Polarity imbalance o: C_pos = C(1+o), C_neg = C(1-o); written to the preset.")]
         = None,
     seed: Annotated[int, typer.Option(help="Seed of the noise generators.")] = 0,
+    pose_noise: Annotated[float, typer.Option(
+        help="Realistic capture: RMS error (degrees) of each written training pose's "
+             "rotation; the true poses go to train/pose_true/.")] = 0.0,
+    pose_noise_translation: Annotated[float, typer.Option(
+        help="RMS error of each written camera centre, as a share of its distance from the "
+             "object (0.01: 1%).")] = 0.0,
+    clock_offset: Annotated[float, typer.Option(
+        help="Written pose k is the true pose at k + this (views): a clock offset.")] = 0.0,
     light: Annotated[str | None, typer.Option(
         help="World direction towards the light, X,Y,Z (+y is up). [default: 0.4,1,0.6]",
         show_default=False)] = None,
@@ -102,6 +110,7 @@ def simulate(
     from hybridneus.errors import ConfigError
     from hybridneus.simulate import (
         REALISTIC_NOISE,
+        CaptureErrors,
         EventModel,
         NoiseConfig,
         Shading,
@@ -136,7 +145,8 @@ def simulate(
             events=EventModel(threshold=threshold, eps=eps, polarity_offset=offset,
                               mosaic=sensor),
             noise=replace(base_noise, **changes), shading=shading, seed=seed, val_views=val_views,
-            test_views=test_views, n_threads=threads, write_rgb=rgb)
+            test_views=test_views, n_threads=threads, write_rgb=rgb,
+            capture=CaptureErrors(pose_noise, pose_noise_translation, clock_offset, seed))
     except ValueError as exc:
         raise ConfigError(f"simulate: {exc}") from None
     info = simulate_dataset(source, out, config, progress=not quiet)

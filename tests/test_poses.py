@@ -140,3 +140,28 @@ def test_before_its_start_the_correction_stays_zero(scene, tmp_path):
     cfg = tiny("train.iters=10", "refine.poses=true", "refine.pose_start=0.5")
     done = fit(scene, cfg, [stop_at(5)], out=tmp_path, device="cpu")
     assert runs.load_checkpoint(done.run_dir)["poses"].abs().max() == 0
+
+
+def test_a_realistic_capture_writes_erroneous_poses_and_keeps_the_truth(tmp_path):
+    from hybridneus.data import load_dataset
+    from hybridneus.simulate import CaptureErrors, SimulationConfig, simulate_dataset
+
+    base = dict(n_views=40, width=32, height=24, val_views=0, test_views=2, revolutions=1.0,
+                supersample=1)
+    simulate_dataset("builtin:device", tmp_path / "exact", SimulationConfig(**base))
+    capture = CaptureErrors(rotation_deg=0.5, translation=0.01, clock_offset_views=0.25)
+    simulate_dataset("builtin:device", tmp_path / "noisy",
+                     SimulationConfig(**base, capture=capture))
+    exact = load_dataset(tmp_path / "exact")
+    noisy = load_dataset(tmp_path / "noisy")
+    truth = np.stack([np.loadtxt(p) for p in
+                      sorted((tmp_path / "noisy" / "train" / "pose_true").glob("*.txt"))])
+    np.testing.assert_allclose(truth, exact["train"].c2w, atol=1e-9)
+    # the same events (rendered from the truth); only the written training poses differ
+    np.testing.assert_array_equal(noisy["train"].events.t, exact["train"].events.t)
+    np.testing.assert_allclose(noisy["test"].c2w, exact["test"].c2w)
+    degrees, moved = pose_errors(noisy["train"].c2w, truth)
+    step = np.degrees(np.arccos(np.clip((np.trace(truth[1, :3, :3].T @ truth[0, :3, :3]) - 1)
+                                        / 2, -1, 1)))
+    assert 0.3 < np.sqrt(np.mean(degrees**2)) < 0.5 + 0.25 * step + 0.2
+    assert 0.004 < np.sqrt(np.mean(moved**2)) / np.linalg.norm(truth[0, :3, 3])

@@ -6,6 +6,7 @@ Open3D is imported only when a :class:`Renderer` is created.
 
 from __future__ import annotations
 
+from hybridneus.simulate.capture import CaptureErrors, written_poses
 from hybridneus.simulate.dataset import (
     CAMERA_RADIUS,
     SimulationConfig,
@@ -41,6 +42,7 @@ __all__ = [
     "BUILTIN_SCENES",
     "CAMERA_RADIUS",
     "REALISTIC_NOISE",
+    "CaptureErrors",
     "EventChunk",
     "EventModel",
     "EventSimulator",
@@ -69,4 +71,5 @@ __all__ = [
     "simulate_dataset",
     "split_trajectories",
     "with_overrides",
+    "written_poses",
 ]

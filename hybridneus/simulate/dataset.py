@@ -27,6 +27,7 @@ import numpy as np
 
 from hybridneus.fileio import atomic_dir
 from hybridneus.simulate import generated
+from hybridneus.simulate.capture import CaptureErrors, written_poses
 from hybridneus.simulate.events import (
     EventChunk,
     EventModel,
@@ -78,6 +79,7 @@ class SimulationConfig:
         batch_views: views per ``cast_rays`` call.
         n_threads: ray-casting threads (0 = all cores).
         write_rgb: write ``rgb/r_*.png`` (the reader only needs their names).
+        capture: errors of the training split's written poses (:class:`CaptureErrors`).
     """
 
     n_views: int = 999
@@ -100,6 +102,7 @@ class SimulationConfig:
     batch_views: int = 8
     n_threads: int = 0
     write_rgb: bool = True
+    capture: CaptureErrors = field(default_factory=CaptureErrors)
 
     def __post_init__(self) -> None:
         if self.n_views < 2:
@@ -232,7 +235,14 @@ def _simulate_split(name: str, traj: Trajectory, renderer: Renderer, config: Sim
     for sub in ("intrinsics", "pose", "rgb", "events"):
         (split_dir / sub).mkdir(parents=True, exist_ok=True)
     n = traj.n_views
-    consumer = _FrameConsumer(split_dir, c2w, _intrinsics_matrix(renderer.camera), config, seed)
+    written = c2w
+    if name == "train" and config.capture.any():  # events from the truth, poses as recorded
+        written = written_poses(c2w, config.capture)
+        (split_dir / "pose_true").mkdir()
+        for k in range(n):
+            _write_matrix(split_dir / "pose_true" / f"r_{k:05d}.txt", c2w[k])
+    consumer = _FrameConsumer(split_dir, written, _intrinsics_matrix(renderer.camera), config,
+                              seed)
     render_s = 0.0
     # Batch b is turned into events and files while batch b + 1 renders (numpy, OpenCV and
     # Open3D release the GIL in their heavy parts); at most one batch waits at a time.

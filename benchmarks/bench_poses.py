@@ -1,0 +1,136 @@
+"""Pose refinement on a capture with known pose errors: Chamfer and pose error, with and without.
+
+1. Simulate a scene (a shared asset, or a generated / built-in source) at full size with the
+   errors of a realistic capture in its written training poses (``CaptureErrors``: by default
+   0.5 degrees RMS rotation, 1% of the camera distance RMS translation, a 0.01-view clock
+   offset); the events come from the true poses, which go to ``train/pose_true/``.
+2. Make the exact-pose copy: the same events, the true poses.
+3. Fit three times with the same preset, seed and number of steps: exact poses; the erroneous
+   poses as given; the erroneous poses with ``refine.poses=true``. Mesh and score each with
+   the suite's protocol (Chamfer against the scene's ground truth).
+4. Measure the given and the refined poses against the truth (rotation in degrees, camera
+   centre as a share of the camera distance), and the refined fit's time per step against
+   the plain one's.
+
+One line per scene to ``benchmarks/results/poses.jsonl``. Targets (the refinement issue):
+refined / exact Chamfer at most 1.2.
+
+    python benchmarks/bench_poses.py --scene bunny --iters 3000
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import common
+import numpy as np
+from bench_roundtrip import fit, score
+
+
+def noisy_dataset(args) -> Path:
+    """The scene simulated with capture errors (cached beside the suite's datasets)."""
+    import run_suite
+
+    from hybridneus.simulate import CaptureErrors, SimulationConfig, simulate_dataset
+
+    tag = (f"{args.scene}-{args.views}v-{args.width}x{args.height}-pose{args.rotation:g}-"
+           f"{args.translation:g}-{args.clock:g}-s{args.noise_seed}")
+    folder = args.cache / tag
+    if not (folder / "scene.json").is_file():
+        assets = run_suite.find_assets(args.assets)
+        source = str(assets[args.scene]) if args.scene in assets else args.scene
+        cfg = SimulationConfig(
+            n_views=args.views, width=args.width, height=args.height, val_views=0,
+            test_views=8, capture=CaptureErrors(args.rotation, args.translation, args.clock,
+                                                args.noise_seed))
+        print(f"[poses] simulating {folder}", file=sys.stderr, flush=True)
+        simulate_dataset(source, folder, cfg)
+    return folder
+
+
+def exact_copy(noisy: Path) -> Path:
+    """The same dataset with the true training poses."""
+    exact = noisy.with_name(noisy.name + "-exact")
+    if not (exact / "scene.json").is_file():
+        shutil.copytree(noisy, exact, dirs_exist_ok=True)
+        shutil.rmtree(exact / "train" / "pose")
+        shutil.move(exact / "train" / "pose_true", exact / "train" / "pose")
+    return exact
+
+
+def pose_error_summary(poses: np.ndarray, truth: np.ndarray) -> dict:
+    from hybridneus.model.poses import pose_errors
+
+    degrees, moved = pose_errors(poses, truth)
+    distance = np.linalg.norm(truth[:, :3, 3], axis=1)
+    share = moved / distance
+    return {"rot_deg_mean": round(float(degrees.mean()), 4),
+            "rot_deg_max": round(float(degrees.max()), 4),
+            "centre_pct_mean": round(100 * float(share.mean()), 4),
+            "centre_pct_max": round(100 * float(share.max()), 4)}
+
+
+def _poses(folder: Path) -> np.ndarray:
+    return np.stack([np.loadtxt(p) for p in sorted(folder.glob("*.txt"))])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 epilog="\n".join(__doc__.splitlines()[1:]))
+    ap.add_argument("--scene", default="bunny", help="a shared asset or a simulate source")
+    ap.add_argument("--assets", type=Path, default=common.REPO.parent / "shared" / "assets")
+    ap.add_argument("--views", type=int, default=999)
+    ap.add_argument("--width", type=int, default=346)
+    ap.add_argument("--height", type=int, default=260)
+    ap.add_argument("--rotation", type=float, default=0.5, help="RMS degrees per view")
+    ap.add_argument("--translation", type=float, default=0.01, help="RMS share of distance")
+    ap.add_argument("--clock", type=float, default=0.01, help="clock offset, views")
+    ap.add_argument("--noise-seed", type=int, default=0)
+    ap.add_argument("--preset", default="fast")
+    ap.add_argument("--iters", type=int, default=3000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--res", type=int, default=300)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--set", dest="sets", action="append", default=[],
+                    help="extra config override of the refined fit (repeatable)")
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
+    common.add_arguments(ap, "poses")
+    args = ap.parse_args()
+    common.check_tree(args)
+    noisy = noisy_dataset(args)
+    exact = exact_copy(noisy)
+    truth = _poses(noisy / "train" / "pose_true")
+    given = _poses(noisy / "train" / "pose")
+    args.gt = noisy / "gt_mesh.ply"
+    scores, runs = {}, {}
+    for name, folder, extra in (("exact", exact, []), ("given", noisy, []),
+                                ("refined", noisy, ["refine.poses=true", *args.sets])):
+        run_dir = fit(args, f"{args.scene}-poses-{name}", folder, tuple(extra))
+        runs[name] = run_dir
+        scores[name] = score(args, run_dir, folder)
+        print(f"[poses] {name}: CD {scores[name]['chamfer']}", file=sys.stderr, flush=True)
+    refined = np.load(runs["refined"] / "poses_refined.npz")["refined"]
+    e, g, r = (scores[k]["chamfer"] for k in ("exact", "given", "refined"))
+    step = {k: scores[k]["fit_s"] / max(scores[k]["steps"], 1) for k in scores}
+    line = {"bench": "poses", **common.stamp(args.threads), "scene": args.scene,
+            "views": args.views, "size": f"{args.width}x{args.height}",
+            "pose_noise": {"rotation_deg": args.rotation, "translation": args.translation,
+                           "clock_offset_views": args.clock, "seed": args.noise_seed},
+            "preset": args.preset, "iters": args.iters, "seed": args.seed,
+            "refine_sets": args.sets, "chamfer_exact": e, "chamfer_given": g,
+            "chamfer_refined": r, "given_ratio": round(g / e, 3),
+            "refined_ratio": round(r / e, 3),
+            "poses_given": pose_error_summary(given, truth),
+            "poses_refined": pose_error_summary(refined, truth),
+            "step_time_ratio": round(step["refined"] / step["given"], 3), "fits": scores}
+    common.append(args.out, line)
+    print(json.dumps({k: v for k, v in line.items() if k != "machine"}))
+
+
+if __name__ == "__main__":
+    main()
