@@ -100,7 +100,7 @@ def test_known_pose_errors_are_recovered_against_a_fixed_scene():
     assert moved_after.max() < 0.2 * moved_before.mean(), (moved_before, moved_after)
 
 
-def test_a_fit_learns_saves_and_resumes_its_pose_corrections(scene, tmp_path):
+def test_a_fit_learns_saves_and_resumes_its_pose_corrections(scene, tmp_path, run_cli):
     import cv2
 
     from hybridneus.api import fit
@@ -120,6 +120,10 @@ def test_a_fit_learns_saves_and_resumes_its_pose_corrections(scene, tmp_path):
     assert cv2.imread(str(straight.run_dir / "previews" / "poses.png")) is not None
     rows = (straight.run_dir / "metrics.csv").read_text().splitlines()
     assert "loss/pose" in rows[0]
+    code, out, err = run_cli("render", str(straight.run_dir), "--views", "events", "--out",
+                             str(tmp_path / "r"), "--windows", "1", "--device", "cpu")
+    assert code == 0, err
+    assert "train: the run's refined poses (poses_refined.npz)" in out
 
     from fitting import stop_at
 
