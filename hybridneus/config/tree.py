@@ -295,7 +295,7 @@ class RefineConfig:
 
     poses: bool = False  # learn a rotation and a translation correction per training view
     pose_lr: float = 0.0005  # Adam learning rate of the corrections (radians, world units)
-    pose_start: float = 0.1  # fraction of training before which the corrections stay zero
+    pose_start: float = 0.5  # fraction of training before which the corrections stay zero
     pose_weight: float = 0.01  # weight of the corrections' mean square (keeps them small)
 
 

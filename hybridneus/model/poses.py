@@ -76,9 +76,10 @@ class PoseCorrections(torch.nn.Module):
         turn = rot @ so3_exp(d[:3]) @ rot.T  # the camera-frame turn, in world axes
         return origins + rot @ d[3:], dirs @ turn.T
 
-    def regulariser(self) -> torch.Tensor:
-        """Mean squared correction (radians and world units alike)."""
-        return (self.delta * self.delta).sum(-1).mean()
+    def regulariser(self, views: list[float]) -> torch.Tensor:
+        """Mean squared correction (radians and world units alike) at ``views``: each
+        correction pays for its size where a batch uses it."""
+        return torch.stack([(self.at(v) ** 2).sum() for v in views]).mean()
 
     def corrected(self, c2w: np.ndarray) -> np.ndarray:
         """(n_views, 4, 4) float64 corrected poses of the given ``c2w`` (n_views, 4, 4)."""

@@ -119,15 +119,17 @@ class Trainer:
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
         self.optimizer = make_optimizer(self.field, cfg)
         self.base_lrs = [cfg.train.lr, cfg.train.lr_variance]
-        self.poses = None  # refine.poses: per-view corrections learned with the field
+        self.params = [q for g in self.optimizer.param_groups for q in g["params"]]
+        self.poses = self.pose_optimizer = None  # refine.poses: per-view corrections
         if cfg.refine.poses:
             from hybridneus.model.poses import PoseCorrections
 
             self.poses = PoseCorrections(self.split.n_views).to(self.device)
-            self.optimizer.add_param_group({"params": [self.poses.delta], "lr": 0.0,
-                                            "name": "poses"})
-            self.base_lrs.append(cfg.refine.pose_lr)
-        self.params = [q for g in self.optimizer.param_groups for q in g["params"]]
+            # Lazy Adam: a batch touches two or three views; dense Adam's momentum would go
+            # on moving every view it touched for tens of steps without new evidence
+            self.pose_optimizer = torch.optim.SparseAdam(
+                [self.poses.delta], lr=cfg.refine.pose_lr, betas=tuple(cfg.train.betas))
+            self.params.append(self.poses.delta)
         self.priors = build_priors(cfg, self.field, self.split, self.aabb, self.device)
         self.objective = Objective(cfg.loss, self.priors, self.aabb)
         self.step = 0
@@ -177,11 +179,16 @@ class Trainer:
         for prior in self.priors:
             factor *= prior.lr_scale(self)
         for group, base in zip(self.optimizer.param_groups, self.base_lrs, strict=True):
-            # the poses wait until the field has settled: early corrections would chase a
-            # field that is still mostly noise
-            on = group.get("name") != "poses" or p_end > self.cfg.refine.pose_start
-            group["lr"] = base * factor if on else 0.0
+            group["lr"] = base * factor
+        if self.pose_optimizer is not None:
+            self.pose_optimizer.param_groups[0]["lr"] = self.cfg.refine.pose_lr * factor
         return factor
+
+    def _poses_learn(self) -> bool:
+        """Whether this step moves the poses: not before ``refine.pose_start``, while the
+        field is still mostly noise that early corrections would chase."""
+        p_end = schedules.progress(self.step + 1, self.total_steps)
+        return self.poses is not None and p_end > self.cfg.refine.pose_start
 
     def train_step(self) -> dict[str, float]:
         """Run one optimisation step; return the logged scalars."""
@@ -203,7 +210,8 @@ class Trainer:
         ctx = StepContext(self.field, out, origins, dirs, p, self.generator, batch)
         terms = self.objective(ctx, batch, self.tonemap_eps())
         if self.poses is not None:
-            terms["pose"] = (cfg.refine.pose_weight, self.poses.regulariser())
+            terms["pose"] = (cfg.refine.pose_weight,
+                             self.poses.regulariser([batch.view0, batch.view1]))
         total = sum(weight * value for weight, value in terms.values())
         self.optimizer.zero_grad(set_to_none=True)
         # Only the trained parameters: the sample points are leaves that require grad (for
@@ -211,6 +219,12 @@ class Trainer:
         # gradient, through the grid's interpolation weights, for nothing.
         total.backward(inputs=[q for q in self.params if q.requires_grad])
         self.optimizer.step()
+        if self.poses is not None:
+            grad, self.poses.delta.grad = self.poses.delta.grad, None
+            if grad is not None and self._poses_learn():
+                self.poses.delta.grad = grad.to_sparse(1)  # only the batch's views move
+                self.pose_optimizer.step()
+                self.poses.delta.grad = None
         for prior in self.priors:
             prior.after_update(self, p)
         self.step += 1
