@@ -730,22 +730,24 @@ def _json_file(doc: dict | str, name: str):
     return make
 
 
-def _calib(**changes):
+def _edited(good: str, **changes):
+    """A copy of the workspace's JSON file ``good`` (``"calib"``, ``"turntable"``) with
+    ``changes`` (a None value removes its key)."""
     def make(ws: Workspace, d: Path) -> Path:
-        doc = {**json.loads(ws.calib.read_text()), **changes}
+        source = getattr(ws, good)
+        doc = {**json.loads(source.read_text()), **changes}
         doc = {k: v for k, v in doc.items() if v is not None}
-        (d / "calib.json").write_text(json.dumps(doc))
-        return d / "calib.json"
+        (d / source.name).write_text(json.dumps(doc))
+        return d / source.name
     return make
+
+
+def _calib(**changes):
+    return _edited("calib", **changes)
 
 
 def _turntable(**changes):
-    def make(ws: Workspace, d: Path) -> Path:
-        doc = {**json.loads(ws.turntable.read_text()), **changes}
-        doc = {k: v for k, v in doc.items() if v is not None}
-        (d / "turntable.json").write_text(json.dumps(doc))
-        return d / "turntable.json"
-    return make
+    return _edited("turntable", **changes)
 
 
 def _npz_without_p(ws: Workspace, d: Path) -> Path:

@@ -201,7 +201,7 @@ def render(
         if "test" in kinds and split not in dataset.splits:
             raise DatasetError(f"{dataset.root}: no split {split!r} to render (it has "
                                f"{', '.join(dataset.splits)})")
-        _use_refined_poses(run_dir, dataset)
+        _use_refined_poses(run_dir, dataset, cfg.data.split)
     out_dir.mkdir(parents=True, exist_ok=True)  # only once the inputs are known good
     if "test" in kinds:
         summary = _render_test_views(field, dataset, split, out_dir, max_views, stride)
@@ -219,17 +219,16 @@ def render(
         typer.echo(f"{path}: recorded events (left) vs rendered log-difference (right)")
 
 
-def _use_refined_poses(run_dir: Path, dataset) -> None:
-    """A run fitted with ``refine.poses`` renders its training split from the refined poses."""
+def _use_refined_poses(run_dir: Path, dataset, split: str) -> None:
+    """A run fitted with ``refine.poses`` renders its training ``split`` from the refined
+    poses."""
     import numpy as np
 
-    from hybridneus.config import load_config
     from hybridneus.training.runlog import POSES
 
     path = run_dir / POSES
     if not path.is_file():
         return
-    split = load_config(run_dir / "config.yaml").data.split
     refined = np.load(path)["refined"]
     if split in dataset.splits and refined.shape == dataset.splits[split].c2w.shape:
         dataset.splits[split].c2w = refined

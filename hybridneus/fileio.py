@@ -34,14 +34,24 @@ def check_output(path: str | os.PathLike, folder: bool = False) -> Path:
         raise OutputError(f"{final}: is a folder; give a file name")
     if final.exists() and folder and not final.is_dir():
         raise OutputError(f"{final}: is a file; give a folder name")
-    parent = final.absolute().parent
+    fault = creation_fault(final.absolute().parent)
+    if fault is not None:
+        raise OutputError(f"{final}: cannot be created, {fault}")
+    return final
+
+
+def creation_fault(folder: str | os.PathLike) -> str | None:
+    """Why ``folder`` (existing or not) could not be created or written into, e.g.
+    ``"/data is a file"`` or ``"/data is not writable"``; ``None`` when it could. Judged on
+    its nearest existing ancestor; nothing is created."""
+    parent = Path(folder)
     while not parent.exists():
         parent = parent.parent
     if not parent.is_dir():
-        raise OutputError(f"{final}: cannot be created, {parent} is a file")
+        return f"{parent} is a file"
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"{final}: cannot be created, {parent} is not writable")
-    return final
+        return f"{parent} is not writable"
+    return None
 
 
 def _alive(pid: int) -> bool:

@@ -23,7 +23,7 @@ import torch
 
 from hybridneus.config import Config, load_config
 from hybridneus.errors import ConfigError, RunError
-from hybridneus.fileio import atomic_path
+from hybridneus.fileio import atomic_path, creation_fault
 
 CHECKPOINT = Path("checkpoints") / "last.pt"
 #: The checkpoint before the last one: read when the last is missing or unreadable.
@@ -41,13 +41,9 @@ def check_runs_root(runs_root: str | os.PathLike) -> None:
     if root.exists() and not root.is_dir():
         raise RunError(f"{root}: not a folder (--out must name a folder for the runs)")
     # nothing is created yet: a fit that fails on its data leaves no empty folder behind
-    parent = root.absolute()
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise RunError(f"{root}: cannot create the runs folder ({parent} is a file)")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise RunError(f"{root}: cannot create the runs folder ({parent} is not writable)")
+    fault = creation_fault(root.absolute())
+    if fault is not None:
+        raise RunError(f"{root}: cannot create the runs folder ({fault})")
 
 
 def new_run_dir(runs_root: str | os.PathLike, scene: str) -> Path:
