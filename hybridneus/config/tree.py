@@ -261,8 +261,8 @@ class CollapseGuard:
     over ``window`` steps means the surface has gone (an early overshoot, pushed back by the
     crop and hull terms), and nothing would bring it back. The guard then reloads the last
     healthy state with a lower learning rate, as it does after a step whose loss is NaN,
-    infinite or ``explode`` times the median of the window before (fits' own spikes stay
-    under 5x). Costs a copy of the field every ``window``
+    infinite or ``explode`` times the median of the window before (far above a healthy
+    fit's spikes). Costs a copy of the field every ``window``
     steps (12 MiB for ``fast``). Switch it off for scenes that really are nearly empty in
     every view.
     """
