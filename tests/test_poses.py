@@ -135,15 +135,32 @@ def test_a_fit_learns_saves_and_resumes_its_pose_corrections(scene, tmp_path, ru
         assert torch.equal(v, again["model"][k]), k
 
 
-def test_before_its_start_the_correction_stays_zero(scene, tmp_path):
+def test_before_its_start_the_correction_stays_zero_and_takes_no_gradient(
+        scene, tmp_path, monkeypatch):
     from fitting import stop_at
 
     from hybridneus.api import fit
+    from hybridneus.model.poses import PoseCorrections
     from hybridneus.training import runs
 
+    # Rays that carry a gradient cost the grid's gradient at every sample (the step time):
+    # they may only do so once the poses learn.
+    tracked = []
+    move = PoseCorrections.move_rays
+
+    def recording(self, *args):
+        o, d = move(self, *args)
+        tracked.append(o.requires_grad or d.requires_grad)
+        return o, d
+
+    monkeypatch.setattr(PoseCorrections, "move_rays", recording)
     cfg = tiny("train.iters=10", "refine.poses=true", "refine.pose_start=0.5")
-    done = fit(scene, cfg, [stop_at(5)], out=tmp_path, device="cpu")
+    done = fit(scene, cfg, [stop_at(5)], out=tmp_path / "a", device="cpu")
     assert runs.load_checkpoint(done.run_dir)["poses"].abs().max() == 0
+    assert tracked and not any(tracked)
+    tracked.clear()
+    fit(scene, cfg, out=tmp_path / "b", device="cpu")
+    assert tracked[-1] and not tracked[0]
 
 
 def test_a_realistic_capture_writes_erroneous_poses_and_keeps_the_truth(tmp_path):

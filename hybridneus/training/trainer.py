@@ -202,26 +202,32 @@ class Trainer:
         if self.step % max(cfg.render.occupancy_every, 1) == 0:
             self.refresh_occupancy()
         batch = self.next_batch()
+        learn_poses = self._poses_learn()
         if self.poses is not None and isinstance(batch, RayBatch):
-            batch = self._corrected(batch)
+            # Rays that carry a gradient to the corrections make the backward pass compute
+            # the grid's gradient at every sample point too: only while the poses learn.
+            with torch.set_grad_enabled(learn_poses):
+                batch = self._corrected(batch)
         origins, dirs = batch_rays(batch)
         out = render_rays(self.field, origins, dirs, self.sampler, self.generator, True,
                           cfg.render.crop_softness)
         ctx = StepContext(self.field, out, origins, dirs, p, self.generator, batch)
         terms = self.objective(ctx, batch, self.tonemap_eps())
         if self.poses is not None:
-            terms["pose"] = (cfg.refine.pose_weight,
-                             self.poses.regulariser([batch.view0, batch.view1]))
+            with torch.set_grad_enabled(learn_poses):
+                terms["pose"] = (cfg.refine.pose_weight,
+                                 self.poses.regulariser([batch.view0, batch.view1]))
         total = sum(weight * value for weight, value in terms.values())
         self.optimizer.zero_grad(set_to_none=True)
         # Only the trained parameters: the sample points are leaves that require grad (for
         # the Eikonal term's d sdf / dx), and a plain backward() would also compute their
         # gradient, through the grid's interpolation weights, for nothing.
-        total.backward(inputs=[q for q in self.params if q.requires_grad])
+        resting = None if learn_poses or self.poses is None else self.poses.delta
+        total.backward(inputs=[q for q in self.params if q.requires_grad and q is not resting])
         self.optimizer.step()
         if self.poses is not None:
             grad, self.poses.delta.grad = self.poses.delta.grad, None
-            if grad is not None and self._poses_learn():
+            if grad is not None and learn_poses:
                 self.poses.delta.grad = grad.to_sparse(1)  # only the batch's views move
                 self.pose_optimizer.step()
                 self.poses.delta.grad = None
