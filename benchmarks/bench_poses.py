@@ -39,16 +39,22 @@ def noisy_dataset(args) -> Path:
 
     from hybridneus.simulate import CaptureErrors, SimulationConfig, simulate_dataset
 
-    tag = (f"{args.scene}-{args.views}v-{args.width}x{args.height}-pose{args.rotation:g}-"
-           f"{args.translation:g}-{args.clock:g}-s{args.noise_seed}")
+    tag = (f"{args.scene.replace(':', '-')}-{args.views}v-{args.width}x{args.height}-"
+           f"pose{args.rotation:g}-{args.translation:g}-{args.clock:g}-s{args.noise_seed}")
     folder = args.cache / tag
     if not (folder / "scene.json").is_file():
         assets = run_suite.find_assets(args.assets)
         source = str(assets[args.scene]) if args.scene in assets else args.scene
+        extra = {}
+        if source.startswith("generated:"):  # sized and shaded as the suite makes them
+            from hybridneus.simulate.generated import generated_conditions, parse_source
+
+            radius, shading = generated_conditions(*parse_source(source))
+            extra = {"object_radius": radius, "shading": shading}
         cfg = SimulationConfig(
             n_views=args.views, width=args.width, height=args.height, val_views=0,
             test_views=8, capture=CaptureErrors(args.rotation, args.translation, args.clock,
-                                                args.noise_seed))
+                                                args.noise_seed), **extra)
         print(f"[poses] simulating {folder}", file=sys.stderr, flush=True)
         simulate_dataset(source, folder, cfg)
     return folder

@@ -1,4 +1,4 @@
-"""What a fit takes from the events when nothing states it: polarity offset, crop and eps.
+"""What a fit takes from the data when nothing states it: threshold, polarity offset, crop, eps.
 
 Each estimator is switched by ``estimate.<name>`` (:class:`hybridneus.config.EstimateConfig`)
 and never overrides a value the config sets (``data.<name>``). The sensor-noise filter runs
@@ -6,6 +6,10 @@ once and serves the offset estimate; the event silhouettes are outlined once and
 the crop and the hull prior (they are cached on the event stream). The values taken, with one
 line each on how, go into the run's ``scene.yaml``; ``hybridneus info`` prints the same.
 
+- **Threshold** (:mod:`hybridneus.data.threshold`): ON and OFF thresholds fitted to the
+  log-brightness changes between the split's ``rgb/`` frames, when neither the path,
+  ``scene.json`` nor the config states C, a tonemap eps is stated (the frames' log mapping)
+  and the frames explain the events (the events alone fix only the ON/OFF ratio). Without usable frames the preset's C stays, and a line says so.
 - **Polarity offset** (:mod:`hybridneus.data.balance`): the median per-pixel polarity balance
   after the noise filter, when neither the path, ``scene.json`` nor the config states an
   offset. A stated one that the events contradict gets a warning.
@@ -96,7 +100,10 @@ def estimate_scene(
     transposed = transposed_events(split)
     if transposed is not None:
         found.warnings.append(transposed)
-    if cfg.polarity_offset and data.polarity_offset is None:
+    if cfg.threshold and data.threshold is None and "threshold" not in dataset.stated:
+        _threshold(found, split, take_offset=cfg.polarity_offset and data.polarity_offset is None)
+    if (cfg.polarity_offset and data.polarity_offset is None
+            and "polarity_offset" not in found.taken):
         _polarity_offset(found, split)
     if cfg.crop and all(getattr(data, k) is None for k in CROP_KEYS):
         _crop(found, split)
@@ -116,6 +123,31 @@ def noise_and_balance(split) -> tuple[str, Any]:
 
     filtered = denoised_split(split, NOISE_SLAB)
     return filtered[1].line(), polarity_balance(split, NOISE_SLAB, filtered)
+
+
+def _threshold(found: Estimates, split, take_offset: bool) -> None:
+    from hybridneus.data.threshold import estimate_thresholds
+
+    p = found.dataset.preset
+    if "tonemap_eps" in found.dataset.stated:
+        est, reason = estimate_thresholds(split, p)
+    else:  # the frames' log mapping is unknown, and C would take its error
+        est, reason = None, "no tonemap eps states the frames' log mapping"
+    if est is None:
+        found.lines.append(
+            f"threshold: C {p.threshold:g} is the {found.dataset.preset_source}'s guess, stated "
+            f"nowhere ({reason}); the events alone fix only the ON/OFF ratio, so a wrong C "
+            "scales the fitted colours' contrast (--set data.threshold=C if it is known)")
+        return
+    found.lines.append(est.line())
+    values = {"threshold": round(est.threshold, 5)}
+    offset = ""
+    if take_offset and "polarity_offset" not in found.dataset.stated:
+        values["polarity_offset"] = round(est.polarity_offset, 4)
+        offset = f", polarity offset {values['polarity_offset']:g}"
+    found.take(values, f"C {values['threshold']:g}{offset} from the rgb/ frames' log-brightness "
+               f"changes (the {found.dataset.preset_source} guessed C {p.threshold:g}; "
+               "estimate.threshold=false keeps the guess)")
 
 
 def _polarity_offset(found: Estimates, split) -> None:

@@ -38,8 +38,11 @@ class FrameBatch:
     view: int
 
 
-def load_frames(split: SplitData, width: int, height: int) -> np.ndarray:
-    """All RGB frames of a split as one (n_views, height, width, 3) uint8 array.
+def load_frames(
+    split: SplitData, width: int, height: int, views: list[int] | None = None
+) -> np.ndarray:
+    """RGB frames of a split as one (n, height, width, 3) uint8 array: those of ``views``
+    (view indices), or all of them.
 
     Raises:
         DatasetError: no ``rgb/`` folder, an unreadable file, or a frame of the wrong size.
@@ -48,8 +51,9 @@ def load_frames(split: SplitData, width: int, height: int) -> np.ndarray:
 
     if split.rgb_paths is None:
         raise DatasetError(f"{split.path}: no rgb/ frames (needed for RGB supervision)")
-    frames = np.empty((len(split.rgb_paths), height, width, 3), dtype=np.uint8)
-    for i, path in enumerate(split.rgb_paths):
+    paths = split.rgb_paths if views is None else [split.rgb_paths[v] for v in views]
+    frames = np.empty((len(paths), height, width, 3), dtype=np.uint8)
+    for i, path in enumerate(paths):
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if image is None:
             raise DatasetError(f"{path}: not a readable image")

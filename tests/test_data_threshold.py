@@ -1,0 +1,94 @@
+"""Contrast thresholds from a split's frames (hybridneus.data.threshold, estimate.threshold)."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from hybridneus.config import DataConfig, EstimateConfig
+from hybridneus.data import load_dataset
+from hybridneus.data.estimate import estimate_scene
+from hybridneus.data.threshold import estimate_thresholds
+
+
+@pytest.fixture(scope="module")
+def unequal(tmp_path_factory):
+    """The built-in device with ON / OFF thresholds 0.2 / 0.3 and a real sensor's noise
+    (per-pixel threshold spread, background activity, hot pixels)."""
+    from hybridneus.simulate import SimulationConfig, simulate_dataset
+    from hybridneus.simulate.events import REALISTIC_NOISE, EventModel
+
+    folder = tmp_path_factory.mktemp("thr") / "device"
+    simulate_dataset("builtin:device", folder, SimulationConfig(
+        n_views=60, width=96, height=72, val_views=0, test_views=2, supersample=1,
+        events=EventModel(threshold=0.25, polarity_offset=-0.2), noise=REALISTIC_NOISE))
+    return folder
+
+
+def _unstated(folder, tmp_path, *keys):
+    """A copy of the dataset whose scene.json no longer states ``keys``."""
+    copy = tmp_path / folder.name
+    shutil.copytree(folder, copy)  # (makes tmp_path too)
+    doc = json.loads((copy / "scene.json").read_text())
+    for key in keys:
+        doc["preset"].pop(key)
+    (copy / "scene.json").write_text(json.dumps(doc))
+    return copy
+
+
+def test_on_and_off_thresholds_come_back_from_the_frames(unequal):
+    ds = load_dataset(unequal)
+    est, why = estimate_thresholds(ds["train"], ds.preset)
+    assert est is not None, why
+    assert est.on == pytest.approx(0.2, rel=0.05)
+    assert est.off == pytest.approx(0.3, rel=0.05)
+    assert est.threshold == pytest.approx(0.25, rel=0.05)
+    assert est.polarity_offset == pytest.approx(-0.2, abs=0.02)
+    assert est.explained > 0.9
+
+
+def test_frames_that_do_not_show_the_events_give_no_estimate(unequal, tmp_path):
+    copy = _unstated(unequal, tmp_path)
+    rng = np.random.default_rng(0)
+    for path in sorted((copy / "train" / "rgb").glob("*.png")):  # placeholders of noise
+        cv2.imwrite(str(path), rng.integers(20, 230, (72, 96, 3), dtype=np.uint8))
+    ds = load_dataset(copy)
+    est, why = estimate_thresholds(ds["train"], ds.preset)
+    assert est is None and "explain only" in why
+    shutil.rmtree(copy / "train" / "rgb")
+    est, why = estimate_thresholds(load_dataset(copy)["train"], ds.preset)
+    assert est is None and why == "no rgb/ frames"
+
+
+def test_a_fit_takes_the_frames_thresholds_only_where_nothing_states_c(unequal, tmp_path):
+    stated = estimate_scene(load_dataset(unequal), EstimateConfig())
+    assert "threshold" not in stated.taken  # scene.json states it
+
+    copy = _unstated(unequal, tmp_path, "threshold", "polarity_offset")
+    found = estimate_scene(load_dataset(copy), EstimateConfig())
+    assert found.dataset.preset.threshold == pytest.approx(0.25, rel=0.05)
+    assert found.dataset.preset.polarity_offset == pytest.approx(-0.2, abs=0.02)
+    assert "rgb/ frames" in found.taken["threshold"]
+    assert any(line.startswith("thresholds from the frames: ON") for line in found.lines)
+    assert found.balance is None  # the frames' ON/OFF ratio, not the balance's
+
+    told = estimate_scene(load_dataset(copy, overrides={"threshold": 0.4}), EstimateConfig(),
+                          DataConfig(threshold=0.4))
+    assert "threshold" not in told.taken and told.dataset.preset.threshold == 0.4
+    off = estimate_scene(load_dataset(copy), EstimateConfig(threshold=False))
+    assert "threshold" not in off.taken and "polarity_offset" in off.taken  # the balance's
+
+    # an eps of another log mapping (the fallback's 0.1 for the simulated 0.001) would move C
+    # by a factor of three: without a stated eps the frames are not used
+    no_eps = _unstated(unequal, tmp_path / "eps", "threshold", "polarity_offset", "tonemap_eps")
+    unmapped = estimate_scene(load_dataset(no_eps), EstimateConfig())
+    assert "threshold" not in unmapped.taken
+    assert any("no tonemap eps states the frames' log mapping" in line
+               for line in unmapped.lines)
+
+    shutil.rmtree(copy / "train" / "rgb")
+    guessed = estimate_scene(load_dataset(copy), EstimateConfig())
+    assert "threshold" not in guessed.taken
+    assert any("guess, stated nowhere (no rgb/ frames)" in line for line in guessed.lines)
