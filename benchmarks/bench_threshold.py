@@ -7,7 +7,7 @@
 3. Fit with the same preset, seed and number of steps:
    - ``told``: the original, which states the true C and offset;
    - ``estimated``: the copy; the fit takes C and the offset from the frames
-     (``estimate.threshold``, on by default);
+     (``estimate.threshold=true``);
    - ``high`` / ``low``: the copy told a C 40% above / below the truth
      (``data.threshold``), the offset from the events' balance: a fit on a wrong guess.
    Mesh and score each with the suite's protocol (Chamfer against the scene's ground truth).
@@ -104,7 +104,7 @@ def main() -> None:
     unstated = unstated_copy(told)
     args.gt = told / "gt_mesh.ply"
     truth = 0.5 * (args.on + args.off)
-    arms = (("told", told, ()), ("estimated", unstated, ()),
+    arms = (("told", told, ()), ("estimated", unstated, ("estimate.threshold=true",)),
             ("high", unstated, (f"data.threshold={truth * (1 + args.wrong):.6f}",)),
             ("low", unstated, (f"data.threshold={truth * (1 - args.wrong):.6f}",)))
     scores, taken = {}, {}

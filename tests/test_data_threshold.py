@@ -63,18 +63,20 @@ def test_frames_that_do_not_show_the_events_give_no_estimate(unequal, tmp_path):
 
 
 def test_a_fit_takes_the_frames_thresholds_only_where_nothing_states_c(unequal, tmp_path):
-    stated = estimate_scene(load_dataset(unequal), EstimateConfig())
+    on = EstimateConfig(threshold=True)
+    stated = estimate_scene(load_dataset(unequal), on)
     assert "threshold" not in stated.taken  # scene.json states it
 
     copy = _unstated(unequal, tmp_path, "threshold", "polarity_offset")
-    found = estimate_scene(load_dataset(copy), EstimateConfig())
+    assert "threshold" not in estimate_scene(load_dataset(copy), EstimateConfig()).taken  # off
+    found = estimate_scene(load_dataset(copy), on)
     assert found.dataset.preset.threshold == pytest.approx(0.25, rel=0.05)
     assert found.dataset.preset.polarity_offset == pytest.approx(-0.2, abs=0.02)
     assert "rgb/ frames" in found.taken["threshold"]
     assert any(line.startswith("thresholds from the frames: ON") for line in found.lines)
     assert found.balance is None  # the frames' ON/OFF ratio, not the balance's
 
-    told = estimate_scene(load_dataset(copy, overrides={"threshold": 0.4}), EstimateConfig(),
+    told = estimate_scene(load_dataset(copy, overrides={"threshold": 0.4}), on,
                           DataConfig(threshold=0.4))
     assert "threshold" not in told.taken and told.dataset.preset.threshold == 0.4
     off = estimate_scene(load_dataset(copy), EstimateConfig(threshold=False))
@@ -83,12 +85,12 @@ def test_a_fit_takes_the_frames_thresholds_only_where_nothing_states_c(unequal, 
     # an eps of another log mapping (the fallback's 0.1 for the simulated 0.001) would move C
     # by a factor of three: without a stated eps the frames are not used
     no_eps = _unstated(unequal, tmp_path / "eps", "threshold", "polarity_offset", "tonemap_eps")
-    unmapped = estimate_scene(load_dataset(no_eps), EstimateConfig())
+    unmapped = estimate_scene(load_dataset(no_eps), on)
     assert "threshold" not in unmapped.taken
     assert any("no tonemap eps states the frames' log mapping" in line
                for line in unmapped.lines)
 
     shutil.rmtree(copy / "train" / "rgb")
-    guessed = estimate_scene(load_dataset(copy), EstimateConfig())
+    guessed = estimate_scene(load_dataset(copy), on)
     assert "threshold" not in guessed.taken
     assert any("guess, stated nowhere (no rgb/ frames)" in line for line in guessed.lines)

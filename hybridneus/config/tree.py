@@ -166,7 +166,7 @@ class EstimateConfig:
     """
 
     crop: bool = True  # shrink the crop cylinder to the events' visual hull (no data.crop_*)
-    threshold: bool = True  # C (and ON/OFF) the rgb/ frames imply, if no C is stated
+    threshold: bool = False  # C (and ON/OFF) the rgb/ frames imply, if no C is stated
     polarity_offset: bool = True  # the offset the events' balance implies, if none is stated
     tonemap_eps: bool = True  # cap eps at eps_max and at what the events' changes need
     eps_max: float = 1e-3  # tonemap_eps: the largest eps the loss uses

@@ -6,7 +6,8 @@ once and serves the offset estimate; the event silhouettes are outlined once and
 the crop and the hull prior (they are cached on the event stream). The values taken, with one
 line each on how, go into the run's ``scene.yaml``; ``hybridneus info`` prints the same.
 
-- **Threshold** (:mod:`hybridneus.data.threshold`): ON and OFF thresholds fitted to the
+- **Threshold** (:mod:`hybridneus.data.threshold`, off by default: still wrong on a full-size
+  scene, docs/data.md): ON and OFF thresholds fitted to the
   log-brightness changes between the split's ``rgb/`` frames, when neither the path,
   ``scene.json`` nor the config states C, a tonemap eps is stated (the frames' log mapping)
   and the frames explain the events (the events alone fix only the ON/OFF ratio). Without usable frames the preset's C stays, and a line says so.
