@@ -43,14 +43,8 @@ def noisy_dataset(args) -> Path:
            f"pose{args.rotation:g}-{args.translation:g}-{args.clock:g}-s{args.noise_seed}")
     folder = args.cache / tag
     if not (folder / "scene.json").is_file():
-        assets = run_suite.find_assets(args.assets)
-        source = str(assets[args.scene]) if args.scene in assets else args.scene
-        extra = {}
-        if source.startswith("generated:"):  # sized and shaded as the suite makes them
-            from hybridneus.simulate.generated import generated_conditions, parse_source
-
-            radius, shading = generated_conditions(*parse_source(source))
-            extra = {"object_radius": radius, "shading": shading}
+        source, extra = run_suite.simulation_source(args.scene,
+                                                    run_suite.find_assets(args.assets))
         cfg = SimulationConfig(
             n_views=args.views, width=args.width, height=args.height, val_views=0,
             test_views=8, capture=CaptureErrors(args.rotation, args.translation, args.clock,

@@ -45,14 +45,8 @@ def simulated(args) -> Path:
            f"on{args.on:g}-off{args.off:g}")
     folder = args.cache / tag
     if not (folder / "scene.json").is_file():
-        assets = run_suite.find_assets(args.assets)
-        source = str(assets[args.scene]) if args.scene in assets else args.scene
-        extra = {}
-        if source.startswith("generated:"):
-            from hybridneus.simulate.generated import generated_conditions, parse_source
-
-            radius, shading = generated_conditions(*parse_source(source))
-            extra = {"object_radius": radius, "shading": shading}
+        source, extra = run_suite.simulation_source(args.scene,
+                                                    run_suite.find_assets(args.assets))
         c = 0.5 * (args.on + args.off)
         cfg = SimulationConfig(
             n_views=args.views, width=args.width, height=args.height, val_views=0,

@@ -74,6 +74,18 @@ def dataset_folder(name: str, args) -> Path:
     return args.cache / tag
 
 
+def simulation_source(source: str, assets: dict[str, Path]) -> tuple[str, dict]:
+    """What ``simulate_dataset`` takes for ``source`` (an asset's mesh file, or the source as
+    given), and the ``SimulationConfig`` fields a generated object is made with (its size and
+    shading; none for other sources)."""
+    if source.startswith("generated:"):
+        from hybridneus.simulate.generated import generated_conditions, parse_source
+
+        radius, shading = generated_conditions(*parse_source(source))
+        return source, {"object_radius": radius, "shading": shading}
+    return (str(assets[source]) if source in assets else source), {}
+
+
 def dataset_for(source: str, assets: dict[str, Path], args) -> Path:
     """Simulate (once) and return the dataset folder of ``source``; a cached one needs no
     mesh, so a machine without the assets can fit a carried copy."""
@@ -82,18 +94,10 @@ def dataset_for(source: str, assets: dict[str, Path], args) -> Path:
     folder = dataset_folder(scene_name(source), args)
     if (folder / "scene.json").is_file():
         return folder
-    extra = {}
-    if source.startswith("generated:"):
-        from hybridneus.simulate.generated import generated_conditions, parse_source
-
-        radius, shading = generated_conditions(*parse_source(source))
-        extra = {"object_radius": radius, "shading": shading}
-        mesh = source
-    elif source in assets:
-        mesh = str(assets[source])
-    else:
+    if not source.startswith("generated:") and source not in assets:
         raise SystemExit(f"{args.assets}: no asset {source!r} (found {sorted(assets)}) and no "
                          f"cached {folder}")
+    mesh, extra = simulation_source(source, assets)
     print(f"[suite] simulating {folder}", file=sys.stderr, flush=True)
     cfg = SimulationConfig(
         n_views=args.views, width=args.width, height=args.height, revolutions=8.0,
