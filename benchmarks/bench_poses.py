@@ -40,7 +40,8 @@ def noisy_dataset(args) -> Path:
     from hybridneus.simulate import CaptureErrors, SimulationConfig, simulate_dataset
 
     tag = (f"{args.scene.replace(':', '-')}-{args.views}v-{args.width}x{args.height}-"
-           f"pose{args.rotation:g}-{args.translation:g}-{args.clock:g}-s{args.noise_seed}")
+           f"pose{args.rotation:g}-{args.translation:g}-{args.clock:g}-s{args.noise_seed}"
+           + (f"-drift{args.drift:g}" if args.drift else ""))
     folder = args.cache / tag
     if not (folder / "scene.json").is_file():
         source, extra = run_suite.simulation_source(args.scene,
@@ -48,7 +49,8 @@ def noisy_dataset(args) -> Path:
         cfg = SimulationConfig(
             n_views=args.views, width=args.width, height=args.height, val_views=0,
             test_views=8, capture=CaptureErrors(args.rotation, args.translation, args.clock,
-                                                args.noise_seed), **extra)
+                                                args.noise_seed, smooth_views=args.drift),
+            **extra)
         print(f"[poses] simulating {folder}", file=sys.stderr, flush=True)
         simulate_dataset(source, folder, cfg)
     return folder
@@ -92,6 +94,8 @@ def main() -> None:
     ap.add_argument("--rotation", type=float, default=0.5, help="RMS degrees per view")
     ap.add_argument("--translation", type=float, default=0.01, help="RMS share of distance")
     ap.add_argument("--clock", type=float, default=0.01, help="clock offset, views")
+    ap.add_argument("--drift", type=float, default=0.0,
+                    help="errors drawn every this many views, linear between (0: per view)")
     ap.add_argument("--noise-seed", type=int, default=0)
     ap.add_argument("--preset", default="fast")
     ap.add_argument("--iters", type=int, default=3000)
@@ -123,7 +127,8 @@ def main() -> None:
     line = {"bench": "poses", **common.stamp(args.threads), "scene": args.scene,
             "views": args.views, "size": f"{args.width}x{args.height}",
             "pose_noise": {"rotation_deg": args.rotation, "translation": args.translation,
-                           "clock_offset_views": args.clock, "seed": args.noise_seed},
+                           "clock_offset_views": args.clock, "seed": args.noise_seed,
+                           "smooth_views": args.drift},
             "preset": args.preset, "iters": args.iters, "seed": args.seed,
             "refine_sets": args.sets, "chamfer_exact": e, "chamfer_given": g,
             "chamfer_refined": r, "given_ratio": round(g / e, 3),

@@ -389,23 +389,28 @@ def poses_section(rows: list[dict]) -> list[str]:
            "`refine.poses=true` (refined) and, in the lines that have it, on the true poses "
            "with refinement (what it costs where nothing needs it). Pose errors against the "
            "truth: mean (max) rotation in degrees and camera-centre shift in % of the "
-           "distance. Step-time ratios are whole-fit means (corrections learn in the second "
-           "half). Targets: refined / exact Chamfer at most 1.2; on exact poses, refinement "
-           "at most 1.05 of the Chamfer and 1.15 of the step time.", "",
-           "| scene | views | errors (deg, share, views) | steps | CD exact | CD given | "
-           "CD refined | given / exact | refined / exact | exact refined / exact | given "
-           "poses | refined poses | step time refined / given | step time on exact | "
+           "distance; errors drawn every N views and interpolated between say `drift N`, and "
+           "the refined fits' extra settings are listed. Step-time ratios are whole-fit means "
+           "(corrections learn in the second half). Targets: refined / exact Chamfer at most "
+           "1.2; on exact poses, refinement at most 1.05 of the Chamfer and 1.15 of the step "
+           "time.", "",
+           "| scene | views | errors (deg, share, views) | refinement | steps | CD exact | "
+           "CD given | CD refined | given / exact | refined / exact | exact refined / exact | "
+           "given poses | refined poses | step time refined / given | step time on exact | "
            "commit | machine | date |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         n = r["pose_noise"]
+        drift = f", drift {n['smooth_views']:g}" if n.get("smooth_views") else ""
+        sets = " ".join(f"`{s}`" for s in r.get("refine_sets") or []) or "per view"
         pose = [f"{p['rot_deg_mean']:.2f} ({p['rot_deg_max']:.2f}) deg, "
                 f"{p['centre_pct_mean']:.2f} ({p['centre_pct_max']:.2f}) %"
                 for p in (r["poses_given"], r["poses_refined"])]
         on_exact = r.get("exact_refined_ratio")
         step_exact = r.get("exact_step_time_ratio")
         out.append(f"| {r['scene']} | {r['views']} {r['size']} | {n['rotation_deg']:g}, "
-                   f"{n['translation']:g}, {n['clock_offset_views']:g} | {r['iters']} | "
+                   f"{n['translation']:g}, {n['clock_offset_views']:g}{drift} | {sets} | "
+                   f"{r['iters']} | "
                    f"{_f(r['chamfer_exact'])} | {_f(r['chamfer_given'])} | "
                    f"{_f(r['chamfer_refined'])} | {r['given_ratio']:.3f} | "
                    f"{r['refined_ratio']:.3f} | "

@@ -74,6 +74,9 @@ def simulate(
              "object (0.01: 1%).")] = 0.0,
     clock_offset: Annotated[float, typer.Option(
         help="Written pose k is the true pose at k + this (views): a clock offset.")] = 0.0,
+    pose_drift_views: Annotated[float, typer.Option(
+        help="Pose errors drawn every this many views and interpolated between (a drift); "
+             "0: each view's drawn on its own.")] = 0.0,
     light: Annotated[str | None, typer.Option(
         help="World direction towards the light, X,Y,Z (+y is up). [default: 0.4,1,0.6]",
         show_default=False)] = None,
@@ -146,7 +149,8 @@ def simulate(
                               mosaic=sensor),
             noise=replace(base_noise, **changes), shading=shading, seed=seed, val_views=val_views,
             test_views=test_views, n_threads=threads, write_rgb=rgb,
-            capture=CaptureErrors(pose_noise, pose_noise_translation, clock_offset, seed))
+            capture=CaptureErrors(pose_noise, pose_noise_translation, clock_offset, seed,
+                                  smooth_views=pose_drift_views))
     except ValueError as exc:
         raise ConfigError(f"simulate: {exc}") from None
     info = simulate_dataset(source, out, config, progress=not quiet)

@@ -294,7 +294,9 @@ class RefineConfig:
     """What a capture states imperfectly, learned with the field (docs/training.md,
     "Refinement"). Off by default: on exact poses it can only cost accuracy and time."""
 
-    poses: bool = False  # learn a rotation and a translation correction per training view
+    poses: bool = False  # learn a rotation and a translation correction of the training poses
+    pose_knots: int = 0  # corrections along the track: 0 one per view, K spread evenly (1: one)
+    clock_offset: bool = False  # with refine.poses: learn a clock offset (views), poses to events
     pose_lr: float = 0.0005  # Adam learning rate of the corrections (radians, world units)
     pose_start: float = 0.5  # fraction of training before which the corrections stay zero
     pose_weight: float = 0.01  # weight of the corrections' mean square (keeps them small)

@@ -1,15 +1,28 @@
-"""Learned corrections of the camera poses (``refine.poses``): one rotation and one translation
-per view, in the camera's own frame, trained with the field.
+"""Learned corrections of the camera poses (``refine.poses``), trained with the field.
 
-A view's corrected pose is ``c2w' = c2w [R(w) | v]``: the camera turns by the rotation vector
-``w`` about its own centre and moves by ``v`` along its own axes (world units). Between views
-the correction is interpolated linearly, as the reader interpolates poses, so a window that
-starts between two views gets a correction between theirs. Rays made from the given poses are
-moved onto the corrected ones in torch, so the event loss's gradient reaches the corrections.
+A correction is a rotation vector ``w`` and a translation ``v`` in the camera's own frame:
+the corrected pose is ``c2w' = c2w [R(w) | v]``, the camera turned by ``w`` about its own
+centre and moved by ``v`` along its own axes (world units). Corrections are held at *knots*
+along the track and interpolated linearly between them (as the reader interpolates poses):
 
-Rotations use :func:`so3_exp` (Rodrigues' formula, with its Taylor series near zero so that
-the gradient at the identity is exact); ``tests/test_poses.py`` checks it and its gradient
-against scipy's rotation vectors.
+- one knot per view (``refine.pose_knots = 0``): each view is free, for independent errors;
+  each view's correction only learns from the windows that end at it, a few per thousand
+  steps at the EventNeRF datasets' 999 views;
+- ``K`` knots spread evenly over the track: a smooth correction for errors that drift
+  (motion-capture drift, a turntable's wobble), every knot learning from a ``K``-th of the
+  stream;
+- one knot: one correction of every view, a fixed camera-frame offset (a hand-eye
+  calibration's error).
+
+A clock offset ``tau`` (views) between the poses and the events (``refine.clock_offset``)
+moves every view along the given track: to first order the pose at ``k + tau`` is ``c2w_k
+[R(tau w_k) | tau v_k]``, with ``(w_k, v_k)`` the camera-frame motion from view ``k`` to
+``k + 1``, and its 6-vector adds to the knots'.
+
+Rays made from the given poses are moved onto the corrected ones in torch, so the event loss's
+gradient reaches the corrections. Rotations use :func:`so3_exp` (Rodrigues' formula, with its
+Taylor series near zero so that the gradient at the identity is exact); ``tests/test_poses.py``
+checks it and its gradient against scipy's rotation vectors.
 """
 
 from __future__ import annotations
@@ -43,29 +56,69 @@ def so3_exp(w: torch.Tensor) -> torch.Tensor:
     return eye + a * k + b * (k @ k)
 
 
+def track_motion(c2w: np.ndarray) -> np.ndarray:
+    """(n, 6) camera-frame motion (rotation vector, translation) from each view to the next of
+    the track ``c2w`` (n, 4, 4); the last view repeats the motion before it."""
+    from scipy.spatial.transform import Rotation
+
+    c2w = np.asarray(c2w, dtype=np.float64)
+    n = len(c2w)
+    motion = np.zeros((n, 6))
+    if n < 2:
+        return motion
+    rel = np.linalg.inv(c2w[:-1]) @ c2w[1:]
+    motion[:-1, :3] = Rotation.from_matrix(rel[:, :3, :3]).as_rotvec()
+    motion[:-1, 3:] = rel[:, :3, 3]
+    motion[-1] = motion[-2]
+    return motion
+
+
 class PoseCorrections(torch.nn.Module):
-    """Per-view pose corrections (see the module docstring).
+    """Pose corrections at knots along the track, and a clock offset (see the module
+    docstring).
 
     Args:
         n_views: views of the split being trained.
+        knots: corrections along the track: 0 (or ``n_views`` and more) one per view,
+            otherwise that many spread evenly from the first view to the last.
+        clock_track: the given poses (n_views, 4, 4); with them a clock offset is learned too.
 
     Attributes:
-        delta: (n_views, 6) parameter, rotation vector (radians) then translation (world
-            units) of each view; zero: the poses as given.
+        delta: (n_knots, 6) parameter, rotation vector (radians) then translation (world
+            units) at each knot; zero: the poses as given.
+        clock: (1,) parameter, the clock offset in views, or ``None``.
     """
 
-    def __init__(self, n_views: int) -> None:
+    def __init__(self, n_views: int, knots: int = 0,
+                 clock_track: np.ndarray | None = None) -> None:
         super().__init__()
         self.n_views = n_views
-        self.delta = torch.nn.Parameter(torch.zeros(n_views, 6))
+        self.n_knots = n_views if knots <= 0 else min(knots, n_views)
+        self.delta = torch.nn.Parameter(torch.zeros(self.n_knots, 6))
+        self.clock = None
+        if clock_track is not None:
+            self.clock = torch.nn.Parameter(torch.zeros(1))
+            self.register_buffer("motion",
+                                 torch.as_tensor(track_motion(clock_track), dtype=torch.float32))
 
-    def at(self, view: float) -> torch.Tensor:
-        """(6,) correction at a continuous view index (linear between views)."""
-        s = min(max(float(view), 0.0), self.n_views - 1.0)
-        a = int(np.floor(s))
-        b = min(a + 1, self.n_views - 1)
+    def _knot_at(self, view: float) -> torch.Tensor:
+        if self.n_knots == 1:
+            return self.delta[0]
+        s = min(max(float(view), 0.0), self.n_views - 1.0) * (self.n_knots - 1) / max(
+            self.n_views - 1, 1)
+        a = min(int(np.floor(s)), self.n_knots - 1)
+        b = min(a + 1, self.n_knots - 1)
         w = s - a
         return self.delta[a] if w == 0.0 else (1.0 - w) * self.delta[a] + w * self.delta[b]
+
+    def at(self, view: float) -> torch.Tensor:
+        """(6,) correction at a continuous view index: the knots' (linear between them) plus
+        the clock offset's move along the track."""
+        d = self._knot_at(view)
+        if self.clock is None:
+            return d
+        k = min(max(int(np.floor(view)), 0), self.n_views - 1)
+        return d + self.clock * self.motion[k]
 
     def move_rays(self, origins: torch.Tensor, dirs: torch.Tensor, rot: torch.Tensor,
                   view: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -77,18 +130,61 @@ class PoseCorrections(torch.nn.Module):
         return origins + rot @ d[3:], dirs @ turn.T
 
     def regulariser(self, views: list[float]) -> torch.Tensor:
-        """Mean squared correction (radians and world units alike) at ``views``: each
-        correction pays for its size where a batch uses it."""
-        return torch.stack([(self.at(v) ** 2).sum() for v in views]).mean()
+        """Mean squared knot correction (radians and world units alike) at ``views``: each
+        correction pays for its size where a batch uses it (the clock offset is free)."""
+        return torch.stack([(self._knot_at(v) ** 2).sum() for v in views]).mean()
 
     def corrected(self, c2w: np.ndarray) -> np.ndarray:
         """(n_views, 4, 4) float64 corrected poses of the given ``c2w`` (n_views, 4, 4)."""
         with torch.no_grad():
-            delta = self.delta.detach().double().cpu()
+            delta = torch.stack([self.at(k) for k in range(self.n_views)]).double().cpu()
             corr = torch.eye(4, dtype=torch.float64).repeat(self.n_views, 1, 1)
             corr[:, :3, :3] = so3_exp(delta[:, :3])
             corr[:, :3, 3] = delta[:, 3:]
         return np.asarray(c2w, dtype=np.float64) @ corr.numpy()
+
+
+class PoseOptimizer:
+    """Adam for the corrections: lazy (sparse) for the knots, since a batch touches only the
+    few knots around its window's two ends and dense Adam's momentum would go on moving every
+    knot it touched for tens of steps without new evidence; plain Adam for the clock offset,
+    which every batch informs."""
+
+    def __init__(self, poses: PoseCorrections, lr: float, betas: tuple[float, float]) -> None:
+        self.poses = poses
+        self.knots = torch.optim.SparseAdam([poses.delta], lr=lr, betas=betas)
+        self.clock = None if poses.clock is None else torch.optim.Adam([poses.clock], lr=lr,
+                                                                       betas=betas)
+
+    def set_lr(self, lr: float) -> None:
+        for opt in (self.knots, self.clock):
+            if opt is not None:
+                opt.param_groups[0]["lr"] = lr
+
+    def step(self, learn: bool) -> None:
+        """Apply the gradients the backward pass left (only when ``learn``), then clear them."""
+        delta = self.poses.delta
+        grad, delta.grad = delta.grad, None
+        if grad is not None and learn:
+            delta.grad = grad.to_sparse(1)  # only the batch's knots move
+            self.knots.step()
+            delta.grad = None
+        if self.clock is not None:
+            if learn and self.poses.clock.grad is not None:
+                self.clock.step()
+            self.poses.clock.grad = None
+
+    def state_dict(self) -> dict:
+        return {"knots": self.knots.state_dict(),
+                "clock": None if self.clock is None else self.clock.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        if "knots" not in state:  # a checkpoint of the per-view corrections alone
+            self.knots.load_state_dict(state)
+            return
+        self.knots.load_state_dict(state["knots"])
+        if self.clock is not None and state.get("clock") is not None:
+            self.clock.load_state_dict(state["clock"])
 
 
 def pose_errors(estimated: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -27,6 +27,10 @@ class CaptureErrors:
             distance from the origin (0.01: 1%).
         clock_offset_views: the written pose of view ``k`` is the true pose at ``k + this``
             (a clock offset between the pose source and the events, in views).
+        smooth_views: 0: each view's error drawn on its own; > 0: errors drawn every this
+            many views and interpolated linearly between (a drift, as motion capture and
+            turntables make); ``rotation_deg`` and ``translation`` are then their RMS at the
+            knots.
         seed: seed of the random errors.
     """
 
@@ -34,10 +38,12 @@ class CaptureErrors:
     translation: float = 0.0
     clock_offset_views: float = 0.0
     seed: int = 0
+    smooth_views: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.rotation_deg < 0 or self.translation < 0:
-            raise ValueError("capture errors: rotation_deg and translation must be >= 0")
+        if self.rotation_deg < 0 or self.translation < 0 or self.smooth_views < 0:
+            raise ValueError("capture errors: rotation_deg, translation and smooth_views must "
+                             "be >= 0")
 
     def any(self) -> bool:
         return bool(self.rotation_deg or self.translation or self.clock_offset_views)
@@ -52,10 +58,19 @@ def written_poses(c2w: np.ndarray, errors: CaptureErrors) -> np.ndarray:
     b = np.minimum(a + 1, n - 1)
     shifted = interpolate_pose(c2w[a], c2w[b], s - a).reshape(n, 4, 4)
     rng = np.random.default_rng(errors.seed)
-    turn = rng.normal(size=(n, 3)) * np.radians(errors.rotation_deg) / np.sqrt(3.0)
+    knots = n if errors.smooth_views <= 0 else int(np.ceil((n - 1) / errors.smooth_views)) + 1
+    turn = _along(rng.normal(size=(knots, 3)), n) * np.radians(errors.rotation_deg) / np.sqrt(3)
     distance = np.linalg.norm(c2w[:, :3, 3], axis=1, keepdims=True)
-    move = rng.normal(size=(n, 3)) * errors.translation * distance / np.sqrt(3.0)
+    move = _along(rng.normal(size=(knots, 3)), n) * errors.translation * distance / np.sqrt(3)
     err = np.tile(np.eye(4), (n, 1, 1))
     err[:, :3, :3] = Rotation.from_rotvec(turn).as_matrix()
     err[:, :3, 3] = move
     return shifted @ err
+
+
+def _along(values: np.ndarray, n: int) -> np.ndarray:
+    """(knots, 3) values spread evenly over ``n`` views, linear between them: (n, 3)."""
+    if len(values) == n:
+        return values
+    at = np.linspace(0.0, len(values) - 1.0, n)
+    return np.stack([np.interp(at, np.arange(len(values)), v) for v in values.T], axis=1)

@@ -34,6 +34,8 @@ def trainer_state(trainer) -> dict[str, Any]:
         else _primitive(trainer.frames.rng.bit_generator.state),
         "priors": {p.name: p.state_dict() for p in trainer.priors},
         "poses": None if trainer.poses is None else trainer.poses.delta.detach().cpu().clone(),
+        "pose_clock": None if trainer.poses is None or trainer.poses.clock is None
+        else trainer.poses.clock.detach().cpu().clone(),
         "pose_optimizer": None if trainer.pose_optimizer is None
         else trainer.pose_optimizer.state_dict(),
         "scene": _scene(trainer),
@@ -64,6 +66,8 @@ def load_trainer_state(trainer, state: dict[str, Any]) -> None:
     if trainer.poses is not None and state.get("poses") is not None:
         with torch.no_grad():
             trainer.poses.delta.copy_(state["poses"])
+            if trainer.poses.clock is not None and state.get("pose_clock") is not None:
+                trainer.poses.clock.copy_(state["pose_clock"])
         if state.get("pose_optimizer") is not None:
             trainer.pose_optimizer.load_state_dict(state["pose_optimizer"])
     trainer.step = int(state["step"])

@@ -120,16 +120,16 @@ class Trainer:
         self.optimizer = make_optimizer(self.field, cfg)
         self.base_lrs = [cfg.train.lr, cfg.train.lr_variance]
         self.params = [q for g in self.optimizer.param_groups for q in g["params"]]
-        self.poses = self.pose_optimizer = None  # refine.poses: per-view corrections
+        self.poses = self.pose_optimizer = None  # refine.poses: learned pose corrections
         if cfg.refine.poses:
-            from hybridneus.model.poses import PoseCorrections
+            from hybridneus.model.poses import PoseCorrections, PoseOptimizer
 
-            self.poses = PoseCorrections(self.split.n_views).to(self.device)
-            # Lazy Adam: a batch touches two or three views; dense Adam's momentum would go
-            # on moving every view it touched for tens of steps without new evidence
-            self.pose_optimizer = torch.optim.SparseAdam(
-                [self.poses.delta], lr=cfg.refine.pose_lr, betas=tuple(cfg.train.betas))
-            self.params.append(self.poses.delta)
+            rf = cfg.refine
+            self.poses = PoseCorrections(
+                self.split.n_views, rf.pose_knots,
+                self.split.c2w if rf.clock_offset else None).to(self.device)
+            self.pose_optimizer = PoseOptimizer(self.poses, rf.pose_lr, tuple(cfg.train.betas))
+            self.params.extend(self.poses.parameters())
         self.priors = build_priors(cfg, self.field, self.split, self.aabb, self.device)
         self.objective = Objective(cfg.loss, self.priors, self.aabb)
         self.step = 0
@@ -181,7 +181,7 @@ class Trainer:
         for group, base in zip(self.optimizer.param_groups, self.base_lrs, strict=True):
             group["lr"] = base * factor
         if self.pose_optimizer is not None:
-            self.pose_optimizer.param_groups[0]["lr"] = self.cfg.refine.pose_lr * factor
+            self.pose_optimizer.set_lr(self.cfg.refine.pose_lr * factor)
         return factor
 
     def _poses_learn(self) -> bool:
@@ -222,21 +222,20 @@ class Trainer:
         # Only the trained parameters: the sample points are leaves that require grad (for
         # the Eikonal term's d sdf / dx), and a plain backward() would also compute their
         # gradient, through the grid's interpolation weights, for nothing.
-        resting = None if learn_poses or self.poses is None else self.poses.delta
-        total.backward(inputs=[q for q in self.params if q.requires_grad and q is not resting])
+        resting = [] if learn_poses or self.poses is None else list(self.poses.parameters())
+        total.backward(inputs=[q for q in self.params
+                               if q.requires_grad and not any(q is r for r in resting)])
         self.optimizer.step()
-        if self.poses is not None:
-            grad, self.poses.delta.grad = self.poses.delta.grad, None
-            if grad is not None and learn_poses:
-                self.poses.delta.grad = grad.to_sparse(1)  # only the batch's views move
-                self.pose_optimizer.step()
-                self.poses.delta.grad = None
+        if self.pose_optimizer is not None:
+            self.pose_optimizer.step(learn_poses)
         for prior in self.priors:
             prior.after_update(self, p)
         self.step += 1
         scalars = {f"loss/{k}": v for k, (_, v) in terms.items()}
         scalars.update({"loss/total": total, "inv_s": self.field.inv_s(),
                         "opacity": out.opacity.mean()})
+        if self.poses is not None and self.poses.clock is not None:
+            scalars["clock_offset"] = self.poses.clock  # views, poses against events
         # One device-to-host copy for all of them: on a GPU each float() would wait for the
         # device. The copy also ends the step's GPU work, so step_seconds counts it.
         values = torch.stack([v.detach().float().reshape(()) for v in scalars.values()])
