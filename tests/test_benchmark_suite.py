@@ -522,3 +522,19 @@ def test_the_carving_of_a_fit_is_recorded_with_its_slices(tiny_scene, tmp_path):
 
     # per variant a strip of two steps, each two 160-pixel slices with 4- and 6-pixel rules
     assert Image.open(image).size == (2 * 160 + 6, 2 * (2 * 160 + 4 + 10))
+
+
+def test_face_errors_find_a_caved_face_and_its_side():
+    import trimesh
+
+    sys.path.insert(0, str(SUITE.parent))
+    spec = importlib.util.spec_from_file_location("face_errors", SUITE.parent / "face_errors.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    gt = trimesh.creation.box((0.4, 0.4, 0.2))
+    caved = trimesh.creation.box((0.4, 0.4, 0.2 - 0.03))  # the -z face 0.03 inside
+    caved.apply_translation((0, 0, 0.015))
+    rows = {r["face"]: r for r in module.face_errors(caved, gt, n_gt=4000, n_mesh=100000)}
+    assert set(rows) == {"+x", "-x", "+y", "-y", "+z", "-z"}
+    assert abs(rows["-z"]["median_signed"] + 0.03) < 0.003, rows["-z"]
+    assert abs(rows["+z"]["median_signed"]) < 0.003, rows["+z"]

@@ -114,6 +114,14 @@ def test_knots_spread_one_correction_over_the_views_between_them():
     assert all(torch.equal(one.at(v), one.delta[0]) for v in (0.0, 3.5, 8.0))
 
 
+def test_a_negative_knot_count_is_refused():
+    from hybridneus.config import apply_overrides, preset_config, validate
+    from hybridneus.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="refine.pose_knots: expected >= 0"):
+        validate(apply_overrides(preset_config("fast"), ["refine.pose_knots=-2"]))
+
+
 def _circle(n: int, arc: float = 2 * np.pi, tilt: float = 0.4) -> np.ndarray:
     """(n, 4, 4) cameras at unequal steps along ``arc`` (radians) around the origin (the
     motion changes between views, as it does on a spiral)."""
@@ -175,7 +183,8 @@ def test_a_drift_and_a_clock_offset_are_recovered_against_a_fixed_scene():
     poses = PoseCorrections(16, knots=1, clock_track=late)
     # the knot pays for its size and the clock offset does not: the offset takes the shift
     _recover(late, truth, poses, 300, weight=1.0, lr=5e-3)
-    assert abs(float(poses.clock) + 0.4) < 0.05, float(poses.clock)
+    clock = float(poses.clock.detach())
+    assert abs(clock + 0.4) < 0.05, clock
     # (the simulator clamps the last view's time to the track's end, which also shortens
     # the motion from the view before it)
     errors = pose_errors(poses.corrected(late), truth)[0][:-2]

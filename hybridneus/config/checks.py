@@ -94,6 +94,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("refine.pose_lr", lambda v: v > 0, "> 0"),
     ("refine.pose_start", _fraction, "a fraction of training in [0, 1]"),
     ("refine.pose_weight", lambda v: v >= 0, ">= 0"),
+    ("refine.pose_knots", lambda v: v >= 0, ">= 0 (0: one correction per view)"),
 ]
 
 
