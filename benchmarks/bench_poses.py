@@ -30,7 +30,7 @@ from pathlib import Path
 
 import common
 import numpy as np
-from bench_roundtrip import fit, score
+from bench_roundtrip import add_fit_arguments, fit, score
 
 
 def noisy_dataset(args) -> Path:
@@ -86,25 +86,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="\n".join(__doc__.splitlines()[1:]))
-    ap.add_argument("--scene", default="bunny", help="a shared asset or a simulate source")
-    ap.add_argument("--assets", type=Path, default=common.REPO.parent / "shared" / "assets")
-    ap.add_argument("--views", type=int, default=999)
-    ap.add_argument("--width", type=int, default=346)
-    ap.add_argument("--height", type=int, default=260)
+    add_fit_arguments(ap, iters=3000)
     ap.add_argument("--rotation", type=float, default=0.5, help="RMS degrees per view")
     ap.add_argument("--translation", type=float, default=0.01, help="RMS share of distance")
     ap.add_argument("--clock", type=float, default=0.01, help="clock offset, views")
     ap.add_argument("--drift", type=float, default=0.0,
                     help="errors drawn every this many views, linear between (0: per view)")
     ap.add_argument("--noise-seed", type=int, default=0)
-    ap.add_argument("--preset", default="fast")
-    ap.add_argument("--iters", type=int, default=3000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--res", type=int, default=300)
-    ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--set", dest="sets", action="append", default=[],
                     help="extra config override of the refined fit (repeatable)")
-    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
     common.add_arguments(ap, "poses")
     args = ap.parse_args()
     common.check_tree(args)

@@ -110,6 +110,22 @@ def write_recording(dataset: Path, out: Path) -> dict:
             "box": np.concatenate([box.min(0), box.max(0)])}
 
 
+
+def add_fit_arguments(ap, iters: int) -> None:
+    """The options of a benchmark that simulates one scene at full size and fits it with
+    :func:`fit` and :func:`score` (bench_poses, bench_threshold)."""
+    ap.add_argument("--scene", default="bunny", help="a shared asset or a simulate source")
+    ap.add_argument("--assets", type=Path, default=common.REPO.parent / "shared" / "assets")
+    ap.add_argument("--views", type=int, default=999)
+    ap.add_argument("--width", type=int, default=346)
+    ap.add_argument("--height", type=int, default=260)
+    ap.add_argument("--preset", default="fast")
+    ap.add_argument("--iters", type=int, default=iters)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--res", type=int, default=300)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
+
 def fit(args, name: str, dataset: Path, sets: tuple[str, ...] = ()) -> Path:
     """Fit with the suite's child job (fixed steps, config overrides ``sets``); the run
     folder."""

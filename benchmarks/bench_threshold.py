@@ -31,7 +31,7 @@ from pathlib import Path
 
 import common
 import yaml
-from bench_roundtrip import fit, score
+from bench_roundtrip import add_fit_arguments, fit, score
 
 
 def simulated(args) -> Path:
@@ -74,23 +74,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="\n".join(__doc__.splitlines()[1:]))
-    ap.add_argument("--scene", default="bunny", help="a shared asset or a simulate source")
-    ap.add_argument("--assets", type=Path, default=common.REPO.parent / "shared" / "assets")
-    ap.add_argument("--views", type=int, default=999)
-    ap.add_argument("--width", type=int, default=346)
-    ap.add_argument("--height", type=int, default=260)
+    add_fit_arguments(ap, iters=2000)
     ap.add_argument("--on", type=float, default=0.2, help="true ON threshold")
     ap.add_argument("--off", type=float, default=0.3, help="true OFF threshold")
     ap.add_argument("--wrong", type=float, default=0.4, help="relative error of the guesses")
     ap.add_argument("--arms", nargs="+", default=["told", "estimated", "high", "low"],
                     choices=["told", "estimated", "high", "low"],
                     help="the fits to run (told is always run: the others' reference)")
-    ap.add_argument("--preset", default="fast")
-    ap.add_argument("--iters", type=int, default=2000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--res", type=int, default=300)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
     common.add_arguments(ap, "threshold")
     args = ap.parse_args()
     common.check_tree(args)
