@@ -39,6 +39,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("grid.domain_margin", lambda v: v >= 0, ">= 0"),
     ("field.color_activation", lambda v: v in ("relu", "softplus"), "relu or softplus"),
     ("field.color_grid_levels", lambda v: v >= 0, ">= 0 (0: the SDF's features)"),
+    ("field.shading_degree", lambda v: 0 <= v <= 4, "0 to 4 (0: the colour head reads the normal)"),
     ("grid.n_levels", lambda v: v >= 1, ">= 1"),
     ("grid.n_features", lambda v: v >= 1, ">= 1"),
     ("grid.base_resolution", lambda v: v >= 2, ">= 2"),

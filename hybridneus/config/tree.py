@@ -52,6 +52,7 @@ class FieldConfig:
     sh_degree: int = 4  # spherical-harmonics degree of the view encoding (degree**2 values)
     color_position_frequencies: int = 0  # PE(x) bands fed to the colour head (0: none)
     color_grid_levels: int = 0  # own hash grid for the colour head (0: it reads the SDF's features)
+    shading_degree: int = 0  # >0: colour = albedo x a scene-wide shading of the normal (SH bands)
     inv_s_init: float = 0.3  # NeuS variance parameter v; inv_s = exp(10 v)
     learned_background: bool = False  # learn the background colour instead of the preset's
 

@@ -10,6 +10,15 @@ or a cube around the crop box), or by annealed frequencies for the ``eventneus``
   through a sigmoid; with ``field.color_grid_levels > 0`` it reads its own hash grid's
   features and only a detached copy of the SDF head's, so that texture is learned by the
   colour grid and cannot pull the surface into relief through the shared features;
+- with ``field.shading_degree = k > 0`` the head no longer reads the normal: it gives an
+  albedo (through the sigmoid), which is multiplied by one shading for the whole scene,
+  ``exp(sum_j w_cj Y_j(n))`` over the first ``k`` bands of real spherical harmonics of the
+  unit normal ``n`` (the coefficients ``w`` (3, k**2) start at 0: unshaded). Under distant
+  light a Lambertian surface's brightness is its albedo times a smooth function of its
+  normal alone, which a few bands hold well. A head that reads the normal can instead paint
+  a dent or a bulge in a face of one colour to look even, which the events, silent inside
+  the face, never contradict; with the shading shared by the whole scene, such a dent
+  shades unevenly, and its image fires as the camera moves;
 - the NeuS sharpness is ``inv_s = exp(10 v)`` with a learned scalar ``v``;
 - the background is the dataset's constant colour or a learned one;
 - the crop cylinder of the scene preset (``x^2 + z^2 <= r^2``, ``y_min <= y <= y_max``) is
@@ -118,7 +127,15 @@ class HybridField(nn.Module):
         self._center_sphere()
         self.sh = SphericalHarmonics(field.sh_degree)
         self.color_pe: nn.Module | None = None
-        color_in = self.sh.out_dim + 3 + field.feature_dim
+        self.shading: nn.Module | None = None
+        self.shading_coeffs: nn.Parameter | None = None
+        if not 0 <= field.shading_degree <= 4:
+            raise ConfigError(
+                f"field.shading_degree: must be 0 to 4, got {field.shading_degree}")
+        if field.shading_degree > 0:
+            self.shading = SphericalHarmonics(field.shading_degree)
+            self.shading_coeffs = nn.Parameter(torch.zeros(3, self.shading.out_dim))
+        color_in = self.sh.out_dim + (0 if self.shading else 3) + field.feature_dim
         self.color_encoding: nn.Module | None = None
         if field.color_grid_levels < 0:
             raise ConfigError(
@@ -247,19 +264,32 @@ class HybridField(nn.Module):
         normals: torch.Tensor,  # (n, 3)
         features: torch.Tensor,  # (n, F)
     ) -> torch.Tensor:
-        """Colour head: RGB (n, 3) in [0, 1].
+        """Colour head: RGB (n, 3), in [0, 1] unless the field is shaded.
 
         Differentiable in all inputs, except ``features`` when the field has its own colour
-        grid (``field.color_grid_levels``).
+        grid (``field.color_grid_levels``). A shaded field (``field.shading_degree``) gives
+        the albedo in [0, 1] times its shading of ``normals``, which may exceed 1.
         """
-        parts = [self.sh(dirs), normals, features]
+        parts = [self.sh(dirs), features]
+        if self.shading is None:
+            parts.insert(1, normals)
         if self.color_encoding is not None:
-            parts[2] = features.detach()
+            parts[-1] = features.detach()
             parts.append(self.color_encoding(self._grid_input(points)).to(points.dtype))
         if self.color_pe is not None:
             parts.append(self.color_pe(points))
         rgb = torch.sigmoid(self.color_net(torch.cat(parts, dim=-1)))
+        if self.shading is not None:
+            rgb = rgb * self.shade(normals)
         return rgb.mean(-1, keepdim=True).expand_as(rgb) if self.grey else rgb
+
+    def shade(self, normals: torch.Tensor) -> torch.Tensor:
+        """The scene's shading (n, 3) of surface normals (n, 3) (need not be unit); ones for
+        a field without shading (``field.shading_degree = 0``)."""
+        if self.shading is None or self.shading_coeffs is None:
+            return torch.ones_like(normals)
+        unit = torch.nn.functional.normalize(normals, dim=-1)
+        return torch.exp(self.shading(unit) @ self.shading_coeffs.t().to(unit.dtype))
 
     def crop_weight(self, points: torch.Tensor, softness: float) -> torch.Tensor:
         """Soft indicator (n,) of the crop cylinder: 1 inside, 0 beyond ``softness`` outside."""
@@ -335,7 +365,7 @@ class HybridField(nn.Module):
         for p, dd in zip(pts.split(chunk), d.split(chunk), strict=True):
             _, grad, feats = self.sdf_gradient_features(p, create_graph=False)
             with torch.no_grad():
-                outs.append(self.radiance(p, dd, grad, feats))
+                outs.append(self.radiance(p, dd, grad, feats).clamp(0.0, 1.0))
         out = torch.cat(outs) if outs else pts
         return out.cpu().numpy() if was_numpy else out
 
