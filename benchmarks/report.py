@@ -486,6 +486,7 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
                          ("early", "The first steps of a fit"),
                          ("carving", "What a fit's opening holds of the solid"),
                          ("floor", "Chamfer floors: ideal meshes that lack an unseen part"),
+                         ("rare_fill", "Meshing that also fills space few views see"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
                          ("data", "Data"), ("simulate", "Simulation"),
