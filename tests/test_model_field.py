@@ -238,3 +238,57 @@ def test_the_sdf_head_of_a_field_uses_the_flushed_softplus():
     f = HybridField(GridConfig(n_levels=2, max_resolution=32), FieldConfig())
     assert isinstance(f.sdf_net.activation, FlushedSoftplus)
     assert f.sdf_net.activation.beta == FieldConfig().softplus_beta
+
+
+def _radiance_at(f: HybridField, normals: torch.Tensor) -> torch.Tensor:
+    """Colours at one point, one view and one feature vector, seen with ``normals``."""
+    n = normals.shape[0]
+    pts = torch.full((n, 3), 0.1)
+    dirs = torch.tensor([[0.0, 0.0, 1.0]]).expand(n, 3)
+    _, feats = f.sdf_and_features(pts)
+    with torch.no_grad():
+        return f.radiance(pts, dirs, normals, feats)
+
+
+def test_a_shaded_field_is_its_albedo_times_one_shading_of_the_normal():
+    normals = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, 0.0, 0.8],
+                            [0.0, 0.0, 5.0]])
+    # today's head reads the normal: the same point and view change colour with it
+    free = _radiance_at(small_field(), normals)
+    assert (free[0] - free[1]).abs().max() > 1e-3
+    shaded = small_field(shading_degree=2)
+    assert shaded.shading_coeffs is not None and shaded.shading_coeffs.shape == (3, 4)
+    # unshaded at the start: the albedo alone, whatever the normal
+    flat = _radiance_at(shaded, normals)
+    assert torch.allclose(flat, flat[:1].expand_as(flat), atol=1e-7)
+    # w on Y_1^0 = sqrt(3 / (4 pi)) z, per channel: the shading is exp(w c z)
+    w = torch.tensor([0.5, -0.3, 1.0])
+    with torch.no_grad():
+        shaded.shading_coeffs[:, 2] = w
+    lit = _radiance_at(shaded, normals)
+    c = np.sqrt(3 / (4 * np.pi))
+    z = torch.tensor([1.0, -1.0, 0.8, 1.0])
+    expected = flat * torch.exp(w[None, :] * c * z[:, None])
+    assert torch.allclose(lit, expected, rtol=1e-5)
+    assert torch.allclose(shaded.shade(normals[3:]), shaded.shade(normals[:1]))  # unit normal
+    assert torch.equal(small_field().shade(normals), torch.ones(4, 3))
+
+
+def test_a_shaded_fields_shading_learns_and_its_public_colour_stays_in_range():
+    f = small_field(shading_degree=3)
+    pts = torch.rand(64, 3) * 0.4 - 0.2
+    dirs = torch.nn.functional.normalize(torch.randn(64, 3), dim=-1)
+    _, grad, feats = f.sdf_gradient_features(pts)
+    f.radiance(pts, dirs, grad, feats).sum().backward()
+    assert f.shading_coeffs.grad is not None and f.shading_coeffs.grad.abs().sum() > 0
+    with torch.no_grad():
+        f.shading_coeffs[:, 0] = 3.0  # a shading far above 1
+    rgb = f.color(pts, dirs)
+    assert float(rgb.max()) <= 1.0 and float(rgb.min()) >= 0.0
+
+
+def test_shading_degree_is_checked():
+    with pytest.raises(ConfigError, match="shading_degree"):
+        small_field(shading_degree=5)
+    with pytest.raises(ConfigError, match="shading_degree"):
+        small_field(shading_degree=-1)
