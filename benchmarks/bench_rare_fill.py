@@ -8,7 +8,8 @@ share ``--share`` of the views (every ``--stride``-th training view, so a share 
 along the capture, not directions) inside the closing of matter by ``--close`` (a fraction of
 the box's longest side) would do, joined to the default fill. It meshes each run as the
 suite does (res 300, default clean-up, the run's cameras) with the default fill, then with
-each share, and scores it against the dataset's ground truth.
+each share, and scores it against the dataset's ground truth; ``added_inside_truth`` is the
+share of the voxels the fill adds that lie inside the ground truth.
 
 It is a measurement, not a meshing option: the fill is made here and handed to
 ``extract_mesh`` through :class:`hybridneus.meshing.unseen.FilledField`.
@@ -73,6 +74,21 @@ def rare_fill(field, cameras: np.ndarray, base, share: float, close: float, stri
                        filled=int(fill.sum()), hidden=base.hidden, cameras=base.cameras)
 
 
+def inside_share(added: np.ndarray, grid, gt) -> float | None:
+    """Share of the voxels ``added`` (bool, on ``grid``) that lie inside the mesh ``gt``."""
+    import open3d as o3d
+
+    idx = np.argwhere(added)
+    if len(idx) == 0:
+        return None
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(gt.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(gt.faces, np.uint32)))
+    pts = grid.points(*idx.T).astype(np.float32)
+    return float((scene.compute_occupancy(o3d.core.Tensor(pts), nsamples=3).numpy() > 0.5)
+                 .mean())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", type=Path, nargs="+", help="suite run folders")
@@ -105,9 +121,13 @@ def main() -> None:
             source = U.FilledField(field, unseen) if unseen.filled else field
             mesh = extract_mesh(source, res=args.res, progress=False)
             cd = chamfer_distance(mesh, gt)
+            added = (unseen.distance < 0) & ~(base.distance < 0)
+            inside = inside_share(added, base.grid, gt)
             line = {"bench": "rare_fill", "run": run.name, "share": share,
                     "close": None if share is None else args.close,
-                    "filled_voxels": unseen.filled, "chamfer": round(cd.chamfer, 5),
+                    "filled_voxels": unseen.filled, "added_voxels": int(added.sum()),
+                    "added_inside_truth": None if inside is None else round(inside, 3),
+                    "chamfer": round(cd.chamfer, 5),
                     "accuracy": round(cd.accuracy, 5), "completeness": round(cd.completeness, 5),
                     **common.stamp(None)}
             common.append(args.out, line)
