@@ -538,3 +538,32 @@ def test_face_errors_find_a_caved_face_and_its_side():
     assert set(rows) == {"+x", "-x", "+y", "-y", "+z", "-z"}
     assert abs(rows["-z"]["median_signed"] + 0.03) < 0.003, rows["-z"]
     assert abs(rows["+z"]["median_signed"]) < 0.003, rows["+z"]
+
+
+def test_the_rare_fill_closes_a_hole_that_only_few_views_see():
+    from hybridneus.meshing import unseen as U
+    from hybridneus.model.analytic import TorusField
+
+    sys.path.insert(0, str(SUITE.parent))
+    spec = importlib.util.spec_from_file_location("bench_rare_fill",
+                                                  SUITE.parent / "bench_rare_fill.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    torus = TorusField(0.3, 0.12)  # lying flat: its hole looks up the y axis
+    angles = np.linspace(0, 2 * np.pi, 95, endpoint=False)
+    ring = np.stack([2 * np.cos(angles), np.zeros(95), 2 * np.sin(angles)], axis=1)
+    above = np.array([[0.1 * i, 2.0, 0.05] for i in range(5)])
+    cameras = np.concatenate([ring, above])  # 5% of the views look down into the hole
+    bounds = ((-0.6, -0.6, -0.6), (0.6, 0.6, 0.6))
+    base = U.unseen_space(torus, cameras, bounds, res=40)
+    grid = base.grid
+
+    def filled_at(unseen, point) -> bool:
+        i = np.round((np.asarray(point) - grid.origin) / grid.voxel).astype(int)
+        return bool(unseen.distance[tuple(i)] < 0)
+
+    assert not filled_at(base, (0, 0, 0))  # the views from above see the hole
+    fill = module.rare_fill(torus, cameras, base, share=0.1, close=0.25, stride=1)
+    assert filled_at(fill, (0, 0, 0)) and not filled_at(fill, (0.55, 0, 0))
+    none = module.rare_fill(torus, cameras, base, share=0.01, close=0.25, stride=1)
+    assert not filled_at(none, (0, 0, 0))
