@@ -184,3 +184,14 @@ def test_checking_the_runs_folder_creates_nothing(tmp_path):
         check_runs_root(tmp_path / "file" / "runs")
     with pytest.raises(RunError, match="not a folder"):
         check_runs_root(tmp_path / "file")
+
+
+def test_the_shaded_colour_models_keys_are_checked():
+    def check(*overrides: str) -> None:
+        validate(apply_overrides(preset_config("fast"), list(overrides)))
+
+    with pytest.raises(ConfigError, match="field.shading_degree: expected 0 to 4"):
+        check("field.shading_degree=5")
+    with pytest.raises(ConfigError, match="field.shading_headlight: needs field.shading_degree"):
+        check("field.shading_headlight=true")
+    check("field.shading_degree=3", "field.shading_headlight=true")

@@ -292,3 +292,21 @@ def test_shading_degree_is_checked():
         small_field(shading_degree=5)
     with pytest.raises(ConfigError, match="shading_degree"):
         small_field(shading_degree=-1)
+
+
+def test_a_headlight_shades_by_the_cosine_between_the_normal_and_the_view():
+    f = small_field(shading_degree=1, shading_headlight=True)
+    assert f.headlight_coeffs is not None and f.headlight_coeffs.shape == (3, 2)
+    normals = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.6, -0.8], [0.0, 0.0, 1.0]])
+    dirs = torch.tensor([[0.0, 0.0, 1.0]]).expand(3, 3)  # looking along +z
+    assert torch.equal(f.shade(normals, dirs), torch.ones(3, 3))  # unlit at the start
+    u = torch.tensor([[0.5, -0.2], [1.0, 0.0], [0.0, 0.3]])
+    with torch.no_grad():
+        f.headlight_coeffs.copy_(u)
+    c = torch.tensor([1.0, 0.8, -1.0])[:, None]  # cosines to the camera
+    expected = torch.exp(c * u[:, 0][None] + c * c * u[:, 1][None])
+    assert torch.allclose(f.shade(normals, dirs), expected, rtol=1e-6)
+    with pytest.raises(ValueError, match="dirs"):
+        f.shade(normals)
+    with pytest.raises(ConfigError, match="shading_headlight"):
+        small_field(shading_headlight=True)

@@ -122,6 +122,9 @@ def validate(cfg: Config) -> Config:
     if cfg.field.color_grid_levels > 0 and cfg.grid.kind == "frequency":
         raise ConfigError("field.color_grid_levels: needs a grid encoding (grid.kind hash or "
                           "dense), not frequency")
+    if cfg.field.shading_headlight and cfg.field.shading_degree == 0:
+        raise ConfigError("field.shading_headlight: needs field.shading_degree > 0 (the "
+                          "shaded colour model)")
     weights = [f"loss.{f.name}" for f in dataclasses.fields(cfg.loss)
                if f.name.startswith("lambda_")]
     weights += [f"priors.{f.name}.weight" for f in dataclasses.fields(cfg.priors)

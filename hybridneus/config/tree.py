@@ -53,6 +53,7 @@ class FieldConfig:
     color_position_frequencies: int = 0  # PE(x) bands fed to the colour head (0: none)
     color_grid_levels: int = 0  # own hash grid for the colour head (0: it reads the SDF's features)
     shading_degree: int = 0  # >0: colour = albedo x a scene-wide shading of the normal (SH bands)
+    shading_headlight: bool = False  # the shading also has a light at the camera (needs a degree)
     inv_s_init: float = 0.3  # NeuS variance parameter v; inv_s = exp(10 v)
     learned_background: bool = False  # learn the background colour instead of the preset's
 

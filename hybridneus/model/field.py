@@ -18,7 +18,9 @@ or a cube around the crop box), or by annealed frequencies for the ``eventneus``
   normal alone, which a few bands hold well. A head that reads the normal can instead paint
   a dent or a bulge in a face of one colour to look even, which the events, silent inside
   the face, never contradict; with the shading shared by the whole scene, such a dent
-  shades unevenly, and its image fires as the camera moves;
+  shades unevenly, and its image fires as the camera moves. ``field.shading_headlight``
+  adds a light carried by the camera (a flash, a ring light): ``u_c1 c + u_c2 c^2`` in the
+  exponent, with ``c`` the cosine between the normal and the direction to the camera;
 - the NeuS sharpness is ``inv_s = exp(10 v)`` with a learned scalar ``v``;
 - the background is the dataset's constant colour or a learned one;
 - the crop cylinder of the scene preset (``x^2 + z^2 <= r^2``, ``y_min <= y <= y_max``) is
@@ -135,6 +137,11 @@ class HybridField(nn.Module):
         if field.shading_degree > 0:
             self.shading = SphericalHarmonics(field.shading_degree)
             self.shading_coeffs = nn.Parameter(torch.zeros(3, self.shading.out_dim))
+        self.headlight_coeffs: nn.Parameter | None = None
+        if field.shading_headlight:
+            if self.shading is None:
+                raise ConfigError("field.shading_headlight: needs field.shading_degree > 0")
+            self.headlight_coeffs = nn.Parameter(torch.zeros(3, 2))
         color_in = self.sh.out_dim + (0 if self.shading else 3) + field.feature_dim
         self.color_encoding: nn.Module | None = None
         if field.color_grid_levels < 0:
@@ -280,16 +287,23 @@ class HybridField(nn.Module):
             parts.append(self.color_pe(points))
         rgb = torch.sigmoid(self.color_net(torch.cat(parts, dim=-1)))
         if self.shading is not None:
-            rgb = rgb * self.shade(normals)
+            rgb = rgb * self.shade(normals, dirs)
         return rgb.mean(-1, keepdim=True).expand_as(rgb) if self.grey else rgb
 
-    def shade(self, normals: torch.Tensor) -> torch.Tensor:
-        """The scene's shading (n, 3) of surface normals (n, 3) (need not be unit); ones for
-        a field without shading (``field.shading_degree = 0``)."""
+    def shade(self, normals: torch.Tensor, dirs: torch.Tensor | None = None) -> torch.Tensor:
+        """The scene's shading (n, 3) of surface normals (n, 3) (need not be unit) seen along
+        unit ray directions ``dirs`` (n, 3; needed with ``field.shading_headlight``); ones
+        for a field without shading (``field.shading_degree = 0``)."""
         if self.shading is None or self.shading_coeffs is None:
             return torch.ones_like(normals)
         unit = torch.nn.functional.normalize(normals, dim=-1)
-        return torch.exp(self.shading(unit) @ self.shading_coeffs.t().to(unit.dtype))
+        log_shade = self.shading(unit) @ self.shading_coeffs.t().to(unit.dtype)
+        if self.headlight_coeffs is not None:
+            if dirs is None:
+                raise ValueError("dirs: a field with a headlight shades by the view direction")
+            c = -(unit * dirs).sum(-1, keepdim=True)  # cosine to the camera
+            log_shade = log_shade + torch.cat([c, c * c], -1) @ self.headlight_coeffs.t()
+        return torch.exp(log_shade)
 
     def crop_weight(self, points: torch.Tensor, softness: float) -> torch.Tensor:
         """Soft indicator (n,) of the crop cylinder: 1 inside, 0 beyond ``softness`` outside."""
