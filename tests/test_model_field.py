@@ -257,14 +257,14 @@ def test_a_shaded_field_is_its_albedo_times_one_shading_of_the_normal():
     free = _radiance_at(small_field(), normals)
     assert (free[0] - free[1]).abs().max() > 1e-3
     shaded = small_field(shading_degree=2)
-    assert shaded.shading_coeffs is not None and shaded.shading_coeffs.shape == (3, 4)
+    assert shaded.shading is not None and shaded.shading.coeffs.shape == (3, 4)
     # unshaded at the start: the albedo alone, whatever the normal
     flat = _radiance_at(shaded, normals)
     assert torch.allclose(flat, flat[:1].expand_as(flat), atol=1e-7)
     # w on Y_1^0 = sqrt(3 / (4 pi)) z, per channel: the shading is exp(w c z)
     w = torch.tensor([0.5, -0.3, 1.0])
     with torch.no_grad():
-        shaded.shading_coeffs[:, 2] = w
+        shaded.shading.coeffs[:, 2] = w
     lit = _radiance_at(shaded, normals)
     c = np.sqrt(3 / (4 * np.pi))
     z = torch.tensor([1.0, -1.0, 0.8, 1.0])
@@ -280,9 +280,9 @@ def test_a_shaded_fields_shading_learns_and_its_public_colour_stays_in_range():
     dirs = torch.nn.functional.normalize(torch.randn(64, 3), dim=-1)
     _, grad, feats = f.sdf_gradient_features(pts)
     f.radiance(pts, dirs, grad, feats).sum().backward()
-    assert f.shading_coeffs.grad is not None and f.shading_coeffs.grad.abs().sum() > 0
+    assert f.shading.coeffs.grad is not None and f.shading.coeffs.grad.abs().sum() > 0
     with torch.no_grad():
-        f.shading_coeffs[:, 0] = 3.0  # a shading far above 1
+        f.shading.coeffs[:, 0] = 3.0  # a shading far above 1
     rgb = f.color(pts, dirs)
     assert float(rgb.max()) <= 1.0 and float(rgb.min()) >= 0.0
 
@@ -296,13 +296,13 @@ def test_shading_degree_is_checked():
 
 def test_a_headlight_shades_by_the_cosine_between_the_normal_and_the_view():
     f = small_field(shading_degree=1, shading_headlight=True)
-    assert f.headlight_coeffs is not None and f.headlight_coeffs.shape == (3, 2)
+    assert f.shading.headlight is not None and f.shading.headlight.shape == (3, 2)
     normals = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.6, -0.8], [0.0, 0.0, 1.0]])
     dirs = torch.tensor([[0.0, 0.0, 1.0]]).expand(3, 3)  # looking along +z
     assert torch.equal(f.shade(normals, dirs), torch.ones(3, 3))  # unlit at the start
     u = torch.tensor([[0.5, -0.2], [1.0, 0.0], [0.0, 0.3]])
     with torch.no_grad():
-        f.headlight_coeffs.copy_(u)
+        f.shading.headlight.copy_(u)
     c = torch.tensor([1.0, 0.8, -1.0])[:, None]  # cosines to the camera
     expected = torch.exp(c * u[:, 0][None] + c * c * u[:, 1][None])
     assert torch.allclose(f.shade(normals, dirs), expected, rtol=1e-6)

@@ -363,10 +363,10 @@ def test_a_training_step_computes_gradients_for_the_parameters_only(scene):
 def test_a_shaded_fit_learns_its_shading_and_saves_it(scene, tmp_path):
     field = fit(scene, tiny("train.iters=30", "field.shading_degree=3"), out=tmp_path,
                 device="cpu")
-    coeffs = field.shading_coeffs.detach().clone()
+    coeffs = field.shading.coeffs.detach().clone()
     assert coeffs.abs().max() > 1e-4  # moved from the unshaded start
     loaded = load_field(field.run_dir, device="cpu")
-    assert torch.equal(loaded.shading_coeffs.detach(), coeffs)
+    assert torch.equal(loaded.shading.coeffs.detach(), coeffs)
     pts = np.random.default_rng(0).uniform(-0.3, 0.3, (50, 3)).astype(np.float32)
     dirs = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (50, 1))
     assert np.allclose(loaded.color(pts, dirs), field.color(pts, dirs), atol=1e-6)

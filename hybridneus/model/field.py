@@ -10,17 +10,9 @@ or a cube around the crop box), or by annealed frequencies for the ``eventneus``
   through a sigmoid; with ``field.color_grid_levels > 0`` it reads its own hash grid's
   features and only a detached copy of the SDF head's, so that texture is learned by the
   colour grid and cannot pull the surface into relief through the shared features;
-- with ``field.shading_degree = k > 0`` the head no longer reads the normal: it gives an
-  albedo (through the sigmoid), which is multiplied by one shading for the whole scene,
-  ``exp(sum_j w_cj Y_j(n))`` over the first ``k`` bands of real spherical harmonics of the
-  unit normal ``n`` (the coefficients ``w`` (3, k**2) start at 0: unshaded). Under distant
-  light a Lambertian surface's brightness is its albedo times a smooth function of its
-  normal alone, which a few bands hold well. A head that reads the normal can instead paint
-  a dent or a bulge in a face of one colour to look even, which the events, silent inside
-  the face, never contradict; with the shading shared by the whole scene, such a dent
-  shades unevenly, and its image fires as the camera moves. ``field.shading_headlight``
-  adds a light carried by the camera (a flash, a ring light): ``u_c1 c + u_c2 c^2`` in the
-  exponent, with ``c`` the cosine between the normal and the direction to the camera;
+- with ``field.shading_degree > 0`` the head no longer reads the normal: it gives an albedo,
+  multiplied by one shading of the normal for the whole scene
+  (:class:`hybridneus.model.shading.SceneShading`);
 - the NeuS sharpness is ``inv_s = exp(10 v)`` with a learned scalar ``v``;
 - the background is the dataset's constant colour or a learned one;
 - the crop cylinder of the scene preset (``x^2 + z^2 <= r^2``, ``y_min <= y <= y_max``) is
@@ -41,6 +33,7 @@ from hybridneus.errors import ConfigError
 from hybridneus.model.crop import VOLUME_BOX, crop_sdf, grid_box
 from hybridneus.model.eventneus import FlushedSoftplus, geometric_init_, make_mlp
 from hybridneus.model.protocol import as_points
+from hybridneus.model.shading import SceneShading
 
 
 def _make_position_encoding(grid: GridConfig) -> tuple[nn.Module, bool]:
@@ -129,20 +122,12 @@ class HybridField(nn.Module):
         self._center_sphere()
         self.sh = SphericalHarmonics(field.sh_degree)
         self.color_pe: nn.Module | None = None
-        self.shading: nn.Module | None = None
-        self.shading_coeffs: nn.Parameter | None = None
-        if not 0 <= field.shading_degree <= 4:
-            raise ConfigError(
-                f"field.shading_degree: must be 0 to 4, got {field.shading_degree}")
-        if field.shading_degree > 0:
-            self.shading = SphericalHarmonics(field.shading_degree)
-            self.shading_coeffs = nn.Parameter(torch.zeros(3, self.shading.out_dim))
-        self.headlight_coeffs: nn.Parameter | None = None
-        if field.shading_headlight:
-            if self.shading is None:
-                raise ConfigError("field.shading_headlight: needs field.shading_degree > 0")
-            self.headlight_coeffs = nn.Parameter(torch.zeros(3, 2))
-        color_in = self.sh.out_dim + (0 if self.shading else 3) + field.feature_dim
+        self.shading: SceneShading | None = None
+        if field.shading_headlight and field.shading_degree == 0:
+            raise ConfigError("field.shading_headlight: needs field.shading_degree > 0")
+        if field.shading_degree != 0:  # 1 to 4, or SceneShading refuses it
+            self.shading = SceneShading(field.shading_degree, field.shading_headlight)
+        color_in = self.sh.out_dim + (3 if self.shading is None else 0) + field.feature_dim
         self.color_encoding: nn.Module | None = None
         if field.color_grid_levels < 0:
             raise ConfigError(
@@ -291,19 +276,11 @@ class HybridField(nn.Module):
         return rgb.mean(-1, keepdim=True).expand_as(rgb) if self.grey else rgb
 
     def shade(self, normals: torch.Tensor, dirs: torch.Tensor | None = None) -> torch.Tensor:
-        """The scene's shading (n, 3) of surface normals (n, 3) (need not be unit) seen along
-        unit ray directions ``dirs`` (n, 3; needed with ``field.shading_headlight``); ones
-        for a field without shading (``field.shading_degree = 0``)."""
-        if self.shading is None or self.shading_coeffs is None:
+        """The scene's shading (n, 3) of normals (n, 3) seen along ``dirs`` (n, 3); ones for
+        a field without shading (``field.shading_degree = 0``)."""
+        if self.shading is None:
             return torch.ones_like(normals)
-        unit = torch.nn.functional.normalize(normals, dim=-1)
-        log_shade = self.shading(unit) @ self.shading_coeffs.t().to(unit.dtype)
-        if self.headlight_coeffs is not None:
-            if dirs is None:
-                raise ValueError("dirs: a field with a headlight shades by the view direction")
-            c = -(unit * dirs).sum(-1, keepdim=True)  # cosine to the camera
-            log_shade = log_shade + torch.cat([c, c * c], -1) @ self.headlight_coeffs.t()
-        return torch.exp(log_shade)
+        return self.shading(normals, dirs)
 
     def crop_weight(self, points: torch.Tensor, softness: float) -> torch.Tensor:
         """Soft indicator (n,) of the crop cylinder: 1 inside, 0 beyond ``softness`` outside."""
