@@ -30,12 +30,10 @@ def seen_share(sdf: np.ndarray, grid, cameras: np.ndarray, points: np.ndarray) -
     """Share (n,) of ``cameras`` whose line of sight to each of ``points`` (n, 3) does not
     meet the zero level of ``sdf`` (on ``grid``)."""
     import open3d as o3d
-    from skimage.measure import marching_cubes
 
-    verts, faces, _, _ = marching_cubes(sdf, 0.0)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(grid.to_world(verts).astype(np.float32)),
-                        o3d.core.Tensor(faces.astype(np.uint32)))
+    from hybridneus.meshing.unseen import occluder
+
+    scene = occluder(sdf, grid)
     origins = points.astype(np.float32)
     seen = np.zeros(len(points))
     for centre in cameras:
@@ -50,9 +48,7 @@ def seen_share(sdf: np.ndarray, grid, cameras: np.ndarray, points: np.ndarray) -
 def rare_fill(field, cameras: np.ndarray, base, share: float, close: float, stride: int):
     """``base`` (the default :class:`UnseenSpace`) joined by the empty space inside the
     closing of matter that at most ``share`` of every ``stride``-th camera sees."""
-    from scipy import ndimage
-
-    from hybridneus.meshing.unseen import UnseenSpace, _closing
+    from hybridneus.meshing.unseen import _closing, region_space
     from hybridneus.meshing.volume import evaluate_sdf
 
     grid = base.grid
@@ -66,26 +62,29 @@ def rare_fill(field, cameras: np.ndarray, base, share: float, close: float, stri
     if near.size and solid.any():
         rare = seen_share(sdf, grid, np.asarray(cameras)[::stride], points[near]) <= share
         fill.flat[near[rare]] = True
-    fill[[0, -1]] = False
-    fill[:, [0, -1]] = False
-    fill[:, :, [0, -1]] = False
-    dist = ndimage.distance_transform_edt(~fill) - ndimage.distance_transform_edt(fill)
-    return UnseenSpace(grid=grid, distance=(dist * grid.voxel).astype(np.float32),
-                       filled=int(fill.sum()), hidden=base.hidden, cameras=base.cameras)
+    return region_space(fill, grid, base.hidden, base.cameras)
 
 
-def inside_share(added: np.ndarray, grid, gt) -> float | None:
-    """Share of the voxels ``added`` (bool, on ``grid``) that lie inside the mesh ``gt``."""
+def truth_scene(gt):
+    """An Open3D ``RaycastingScene`` of the ground-truth mesh ``gt`` (for occupancy)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(gt.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(gt.faces, np.uint32)))
+    return scene
+
+
+def inside_share(added: np.ndarray, grid, truth) -> float | None:
+    """Share of the voxels ``added`` (bool, on ``grid``) inside the mesh of ``truth``
+    (:func:`truth_scene`)."""
     import open3d as o3d
 
     idx = np.argwhere(added)
     if len(idx) == 0:
         return None
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(gt.vertices, np.float32)),
-                        o3d.core.Tensor(np.asarray(gt.faces, np.uint32)))
     pts = grid.points(*idx.T).astype(np.float32)
-    return float((scene.compute_occupancy(o3d.core.Tensor(pts), nsamples=3).numpy() > 0.5)
+    return float((truth.compute_occupancy(o3d.core.Tensor(pts), nsamples=3).numpy() > 0.5)
                  .mean())
 
 
@@ -112,6 +111,7 @@ def main() -> None:
         config = yaml.safe_load((run / "config.yaml").read_text())
         dataset = Path(config["data"]["path"])
         gt = trimesh.load(dataset / "gt_mesh.ply", force="mesh")
+        truth = truth_scene(gt)
         field = load_field(run, device="cpu")
         cameras = load_cameras(run)
         base = U.unseen_space(field, cameras, _examined_box(field, None, None))
@@ -122,7 +122,7 @@ def main() -> None:
             mesh = extract_mesh(source, res=args.res, progress=False)
             cd = chamfer_distance(mesh, gt)
             added = (unseen.distance < 0) & ~(base.distance < 0)
-            inside = inside_share(added, base.grid, gt)
+            inside = inside_share(added, base.grid, truth)
             line = {"bench": "rare_fill", "run": run.name, "share": share,
                     "close": None if share is None else args.close,
                     "filled_voxels": unseen.filled, "added_voxels": int(added.sum()),

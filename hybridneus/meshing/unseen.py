@@ -73,14 +73,8 @@ def _hidden_from_all(
     """Flat indices of ``candidates`` (grid points) from which every camera's line of sight
     meets the zero level of ``sdf`` (the volume's marching-cubes surface)."""
     import open3d as o3d
-    from skimage.measure import marching_cubes
 
-    verts, faces, _, _ = marching_cubes(sdf, 0.0)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(grid.to_world(verts).astype(np.float32)),
-        o3d.core.Tensor(faces.astype(np.uint32)),
-    )
+    scene = occluder(sdf, grid)
     shape = tuple(sdf.shape)
     for centre in cameras:
         if candidates.size == 0:
@@ -92,6 +86,38 @@ def _hidden_from_all(
         hit = scene.cast_rays(o3d.core.Tensor(np.hstack([origins, dirs])))["t_hit"].numpy()
         candidates = candidates[hit < dist]  # blocked on the way: still unseen
     return candidates
+
+
+def occluder(sdf: np.ndarray, grid: VoxelGrid):
+    """An Open3D ``RaycastingScene`` of the zero level of ``sdf`` (sampled on ``grid``), in
+    world coordinates: what hides space from a camera."""
+    import open3d as o3d
+    from skimage.measure import marching_cubes
+
+    verts, faces, _, _ = marching_cubes(sdf, 0.0)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(grid.to_world(verts).astype(np.float32)),
+        o3d.core.Tensor(faces.astype(np.uint32)),
+    )
+    return scene
+
+
+def region_space(fill: np.ndarray, grid: VoxelGrid, hidden: int, cameras: int) -> UnseenSpace:
+    """The :class:`UnseenSpace` of the voxels ``fill`` (bool, on ``grid``; changed in place):
+    the box's faces are left empty, what reaches them is cut there as the crop cuts matter."""
+    from scipy import ndimage
+
+    shape = tuple(grid.shape)
+    fill[[0, -1]] = False
+    fill[:, [0, -1]] = False
+    fill[:, :, [0, -1]] = False
+    if fill.any():
+        distance = ndimage.distance_transform_edt(~fill) - ndimage.distance_transform_edt(fill)
+    else:
+        distance = np.full(shape, float(max(shape)))
+    return UnseenSpace(grid=grid, distance=(distance * grid.voxel).astype(np.float32),
+                       filled=int(fill.sum()), hidden=hidden, cameras=cameras)
 
 
 def _closing(solid: np.ndarray, radius: float) -> np.ndarray:
@@ -139,9 +165,6 @@ def unseen_space(
     Raises:
         ValueError: no cameras, or a non-finite camera centre.
     """
-    from scipy import ndimage
-
-
     cameras = np.asarray(cameras, dtype=np.float64).reshape(-1, 3)
     if len(cameras) == 0 or not np.isfinite(cameras).all():
         raise ValueError("cameras: expected finite camera centres (n_views >= 1, 3)")
@@ -164,21 +187,7 @@ def unseen_space(
         fill &= _closing(solid, radius)
     if min_thickness > 0 and fill.any():
         fill = _opening(fill, 0.5 * min_thickness)
-    # The box's faces stay empty: what reaches them is cut there, as the crop cuts matter.
-    fill[[0, -1]] = False
-    fill[:, [0, -1]] = False
-    fill[:, :, [0, -1]] = False
-    if fill.any():
-        distance = ndimage.distance_transform_edt(~fill) - ndimage.distance_transform_edt(fill)
-    else:
-        distance = np.full(shape, float(max(shape)))
-    return UnseenSpace(
-        grid=grid,
-        distance=(distance * grid.voxel).astype(np.float32),
-        filled=int(fill.sum()),
-        hidden=int(hidden.size),
-        cameras=len(chosen),
-    )
+    return region_space(fill, grid, int(hidden.size), len(chosen))
 
 
 class FilledField:
