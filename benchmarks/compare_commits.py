@@ -10,6 +10,8 @@ format. ``python benchmarks/report.py --compare BASE NEW`` then pairs them.
 
     python benchmarks/compare_commits.py cf67ae4 --seeds 0 1 2
     python benchmarks/compare_commits.py cf67ae4 --scenes none --generated 6 --generated-seed 2026
+    python benchmarks/compare_commits.py b1bba48 --scenes none --generated 6 --generated-seed 2026 \
+        --iters 2000 --threads 1
 """
 
 from __future__ import annotations
@@ -52,8 +54,9 @@ def run_at(args, commit: str, name: str, seed: int) -> None:
     before = len(common.read_lines(out))
     seeded = (["--seeds", str(seed)] if (tree / "benchmarks" / "common.py").is_file()
               else ["--set", f"train.seed={seed}"])
+    budget = (["--iters", str(args.iters)] if args.iters else ["--minutes", str(args.minutes)])
     cmd = [sys.executable, str(tree / "benchmarks" / "run_suite.py"), "--scenes", name,
-           "--presets", "fast", "--minutes", str(args.minutes), *seeded,
+           "--presets", "fast", *budget, *seeded, "--threads", str(args.threads),
            "--assets", str(args.assets), "--cache", str(args.cache), "--out-runs",
            str(args.out_runs), "--out", str(out), "--curve", "2", "--image-views", "0"]
     # the site first: the worktree's package, not the one installed from this checkout
@@ -64,7 +67,7 @@ def run_at(args, commit: str, name: str, seed: int) -> None:
         converted = {"bench": "suite", "machine": common.machine("cpu"), **line,
                      "commit": stamped.removesuffix("+dirty"),
                      "dirty": line.get("dirty", stamped.endswith("+dirty")), "seed": seed,
-                     "preset": "fast", "overrides": [], "iters": None,
+                     "preset": "fast", "overrides": [], "iters": args.iters,
                      "command": f"python benchmarks/compare_commits.py {args.base} {args.new} "
                      f"(fits with the commit's run_suite.py {' '.join(cmd[2:])})"}
         common.append(args.out, converted)
@@ -76,7 +79,8 @@ def done(args) -> set[tuple[str, str, int]]:
     """(commit, scene, seed) of this comparison's fits already in ``--out``: a comparison
     started again goes on where it stopped."""
     return {(x["commit"], x["scene"], x["seed"]) for x in common.read_lines(args.out)
-            if x.get("bench") == "suite" and x.get("minutes") == args.minutes
+            if x.get("bench") == "suite" and (x.get("iters") == args.iters if args.iters
+                                              else x.get("minutes") == args.minutes)
             and "compare_commits.py" in str(x.get("command", ""))}
 
 
@@ -91,7 +95,12 @@ def main() -> None:
     ap.add_argument("--generated", type=int, default=0, metavar="N")
     ap.add_argument("--generated-seed", type=int, default=0)
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    ap.add_argument("--minutes", type=float, default=15.0)
+    budget = ap.add_mutually_exclusive_group()
+    budget.add_argument("--minutes", type=float, default=15.0, help="fit budget (default 15)")
+    budget.add_argument("--iters", type=int, help="a fixed schedule of this many steps instead "
+                        "of a budget: it repeats exactly on a CPU, so pairs differ by the commits "
+                        "alone and may run beside other work")
+    ap.add_argument("--threads", type=int, default=2, help="torch threads per fit")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
     ap.add_argument("--out-runs", type=Path, default=WORK / "runs")
     common.add_arguments(ap, "suite")
