@@ -1,4 +1,4 @@
-"""The contrast thresholds that a split's frames and the events between them imply.
+"""The contrast thresholds that a split's frames and its events imply.
 
 Events alone do not fix the threshold C. A field whose log-brightness contrast around the
 background is scaled by k explains the same events with ``k * C``, as long as its colours stay
@@ -8,14 +8,24 @@ would shrink C and the field's contrast together. What the events do fix is the 
 ON and OFF thresholds (a pixel that brightens and darkens again fires
 ``n_on * C_on = n_off * C_off``; :mod:`hybridneus.data.balance` estimates it).
 
-Frames taken at the views' times break the scale: between frames i and j a pixel's log
-brightness changes by ``dL = L_j - L_i`` with ``L = log(c**2.2 + eps)`` of its mosaic channel
-(the model the event loss uses), and the events between them count
-``dL ~ C_on * n_on - C_off * n_off``, up to the two ends' sub-threshold residuals. A robust
-(soft-L1) least-squares fit of ``dL`` against ``(n_on, -n_off)`` over the pixels with events
-gives both thresholds. Frames that do not show the events' brightness (placeholders, another
-exposure, another camera) explain little of ``dL``'s variance; the estimate then says so and
-returns no value.
+Frames taken at the views' times break the scale. A pixel's events do not follow the change
+between two frames alone: each pixel fires against its own reference level, which lags its
+brightness by up to a threshold, so a small change fires at one pixel and not at the next, and
+a pixel that rose and fell back below a threshold fires nothing. A least-squares fit of frame
+differences against the counts between them cannot see that state; it read 0.14 / 0.16 for ON
+/ OFF thresholds of 0.2 / 0.3 on a textured asset. So the estimate *replays* the sensor
+instead: over a run of consecutive frames it follows every pixel's log brightness ``L =
+log(c**2.2 + eps)`` of its mosaic channel (the model the event loss uses), linear in time
+between frames, from a reference at the first frame, firing ON (OFF) events whenever ``L``
+passes the reference by ``C_on`` (``C_off``) and moving the reference by a whole threshold
+(:func:`replay_counts`). The thresholds are those whose replay fires as many ON and as many OFF
+events as the stream holds over the same span (:func:`_solve`). Before the last solve, the stream's
+background activity (its rate at pixels whose brightness never changes by half a threshold) is
+taken off the totals, and hot pixels (far more events than their replay) are left out.
+
+Frames that do not show the events' brightness (placeholders, another exposure, another
+camera) replay into per-pixel counts unlike the stream's; the share of the counts' variance
+that the replay explains is reported, and below :data:`MIN_EXPLAINED` no value is returned.
 """
 
 from __future__ import annotations
@@ -27,29 +37,41 @@ import numpy as np
 from hybridneus.data.dataset import SplitData
 from hybridneus.data.presets import ScenePreset
 
-__all__ = ["ThresholdEstimate", "estimate_thresholds"]
+__all__ = ["ThresholdEstimate", "estimate_thresholds", "replay_counts"]
 
-#: The least share of ``dL``'s variance the fitted thresholds must explain.
+#: The least share of the per-pixel event counts' variance the replay must explain.
 MIN_EXPLAINED = 0.5
-#: The fewest pixels with events the estimate needs.
-MIN_PIXELS = 2000
+#: The fewest events of each polarity the estimate needs.
+MIN_EVENTS = 2000
+#: Frame values (of 255) at or beyond which a pixel's brightness is not known: black, saturated.
+DARK, BRIGHT = 4, 251
+#: Pixels whose log brightness spans less than this are left out of the first solve.
+MIN_CHANGE = 0.02
+#: A pixel is hot when it fires more than this many times its replay's events (plus
+#: :data:`HOT_SLACK`).
+HOT_FACTOR, HOT_SLACK = 4.0, 10.0
 
 
 @dataclass(frozen=True)
 class ThresholdEstimate:
-    """Thresholds fitted to frame log-brightness changes.
+    """Thresholds whose replay of the frames fires the stream's events.
 
     Attributes:
         on: threshold of ON (brightening) events, log units.
         off: threshold of OFF events.
-        explained: share of ``dL``'s variance the fit explains (1: all), over the pixels used.
-        pixels: pixel samples (pixel x frame pair) the fit used.
+        explained: share of the per-pixel ON and OFF counts' variance that the replay
+            explains (1: all), over the pixels used.
+        pixels: pixels the replay followed.
+        views: consecutive frames it followed them over.
+        noise_rate: background events per pixel and frame interval taken off the totals.
     """
 
     on: float
     off: float
     explained: float
     pixels: int
+    views: int = 0
+    noise_rate: float = 0.0
 
     @property
     def threshold(self) -> float:
@@ -64,111 +86,195 @@ class ThresholdEstimate:
     def line(self) -> str:
         """One line for the log and ``hybridneus info``."""
         return (f"thresholds from the frames: ON {self.on:.4g}, OFF {self.off:.4g} (C "
-                f"{self.threshold:.4g}, polarity offset {self.polarity_offset:+.3f}; "
-                f"{100 * self.explained:.0f}% of the frames' log-brightness changes explained "
-                f"over {self.pixels} pixels)")
+                f"{self.threshold:.4g}, polarity offset {self.polarity_offset:+.3f}; the "
+                f"sensor replayed over {self.views} frames explains "
+                f"{100 * self.explained:.0f}% of the event counts of {self.pixels} pixels)")
 
 
-def _log_brightness(frame: np.ndarray, weights: np.ndarray, eps: float) -> np.ndarray:
-    c = frame.reshape(-1, 3).astype(np.float64) / 255.0
-    return (weights * np.log(c**2.2 + eps)).sum(axis=1)
+def replay_counts(log_frames: np.ndarray, c_on: float, c_off: float) -> tuple[np.ndarray,
+                                                                           np.ndarray]:
+    """ON and OFF events an ideal sensor fires while watching ``log_frames``.
+
+    Each pixel's reference starts at its first frame; between frames the log brightness is
+    linear in time, so within one interval it moves one way and crosses
+    ``floor((L - ref) / C_on)`` ON (or ``floor((ref - L) / C_off)`` OFF) levels, each moving
+    the reference by a whole threshold (the simulator's model, :mod:`hybridneus.simulate.events`).
+
+    Args:
+        log_frames: (n_frames, n_pixels) log brightness, in time order.
+        c_on: ON threshold (> 0).
+        c_off: OFF threshold (> 0).
+
+    Returns:
+        (on, off): (n_pixels,) float64 event counts over the whole run.
+    """
+    ref = log_frames[0].astype(np.float64)
+    on = np.zeros(ref.shape)
+    off = np.zeros(ref.shape)
+    for frame in log_frames[1:]:
+        up = np.floor((frame - ref) / c_on).clip(0.0, None)
+        down = np.floor((ref - frame) / c_off).clip(0.0, None)
+        ref += up * c_on - down * c_off
+        on += up
+        off += down
+    return on, off
 
 
-def _latest_polarity(pixel: np.ndarray, polarity: np.ndarray, n_pixels: int) -> np.ndarray:
-    """(n_pixels,) int8 polarity of each pixel's last event in time order (0: none)."""
-    out = np.zeros(n_pixels, dtype=np.int8)
-    last, first_of_reversed = np.unique(pixel[::-1], return_index=True)
-    out[last] = polarity[::-1][first_of_reversed]
-    return out
+def _log_frames(split: SplitData, preset: ScenePreset, views: int, pixels: np.ndarray,
+                chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """(views, n) float32 log brightness of ``pixels`` (flat indices) in the first ``views``
+    frames, and (n,) whether a pixel is neither black nor saturated in any of them."""
+    from hybridneus.data.frames import load_frames
+    from hybridneus.data.mosaic import mosaic_weights
+
+    w, h = preset.width, preset.height
+    weights = mosaic_weights(np.stack([pixels % w, pixels // w], axis=1), preset.mosaic)
+    out = np.empty((views, pixels.size), dtype=np.float32)
+    known = np.ones(pixels.size, dtype=bool)
+    for a in range(0, views, chunk):
+        frames = load_frames(split, w, h, list(range(a, min(a + chunk, views))))
+        values = frames.reshape(len(frames), h * w, 3)[:, pixels]
+        known &= (values.min(axis=(0, 2)) > DARK) & (values.max(axis=(0, 2)) < BRIGHT)
+        c = values.astype(np.float32) / 255.0
+        out[a:a + len(frames)] = (weights[None] * np.log(c**2.2 + preset.tonemap_eps)).sum(-1)
+    return out, known
+
+
+def _observed_counts(split: SplitData, pixels: np.ndarray, t0: float,
+                     t1: float) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) ON and OFF events of ``pixels`` (sorted flat indices) with times in (t0, t1]."""
+    ev = split.events
+    i0, i1 = (int(np.searchsorted(ev.t, t, side="right")) for t in (t0, t1))
+    flat = ev.y[i0:i1].astype(np.int64) * split.width + ev.x[i0:i1]
+    at = np.searchsorted(pixels, flat).clip(0, pixels.size - 1)
+    hit = pixels[at] == flat
+    positive = ev.p[i0:i1] > 0
+    on = np.bincount(at[hit & positive], minlength=pixels.size).astype(np.float64)
+    off = np.bincount(at[hit & ~positive], minlength=pixels.size).astype(np.float64)
+    return on, off
+
+
+def _solve(log_frames: np.ndarray, on_total: float, off_total: float, start: float,
+           approach: int = 8, steps: int = 16) -> tuple[float, float] | None:
+    """Thresholds whose replay fires ``on_total`` ON and ``off_total`` OFF events (``None``
+    when the frames fire no events of a polarity at a threshold tried).
+
+    A count falls close to as ``1 / C`` overall (a pixel that changes by ``D`` fires about
+    ``D / C``), so first each step scales both thresholds by their replay's count over the
+    target. But a count moves in whole events: frames of 8-bit values repeat exact brightness
+    levels, and near the truth a count can jump by a tenth over half a percent of C, where
+    such steps overshoot and cycle. So the last steps bisect, in log space and both
+    polarities at once, within a quarter of the mean of those steps; there a count hardly
+    depends on the other polarity's threshold (far from it, it does: with no OFF events a
+    pixel's reference never comes down and it fires ON events only at new highs)."""
+    target = np.array([on_total, off_total])
+
+    def counts(c: np.ndarray) -> np.ndarray | None:
+        n = np.array([v.sum() for v in replay_counts(log_frames, *c)])
+        return None if n.min() <= 0 else n
+
+    c = np.array([start, start], dtype=np.float64)
+    path = []
+    for _ in range(approach):
+        n = counts(c)
+        if n is None:
+            return None
+        c = np.clip(c * n / target, 1e-3, 10.0)
+        path.append(np.log(c))
+    centre = np.mean(path[-4:], axis=0)
+    lo, hi = centre - np.log(1.25), centre + np.log(1.25)
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        n = counts(np.exp(mid))
+        if n is None:
+            return None
+        above = n > target  # too many events: the threshold is higher
+        lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
+    c_on, c_off = (float(v) for v in np.exp(0.5 * (lo + hi)))
+    return c_on, c_off
 
 
 def estimate_thresholds(
     split: SplitData,
     preset: ScenePreset,
-    span: int = 1,
-    n_pairs: int = 128,
-    max_pixels: int = 200_000,
+    max_pixels: int = 50_000,
+    max_views: int = 2000,
     seed: int = 0,
 ) -> tuple[ThresholdEstimate | None, str]:
-    """ON and OFF thresholds from the split's ``rgb/`` frames and its events.
+    """ON and OFF thresholds from the split's ``rgb/`` frames and its events (see the module
+    docstring).
 
     Args:
         split: the split; its ``rgb_paths`` must name the frames at the views' times.
-        preset: image size, mosaic and ``tonemap_eps`` (the sensor's log mapping).
-        span: views between the two frames of a pair. One: each pixel's own threshold
-            (sensors differ from pixel to pixel) then adds least to the error, which grows
-            with the events counted.
-        n_pairs: frame pairs, spread evenly over the split.
-        max_pixels: at most this many pixel samples go into the fit (drawn at random).
-        seed: random seed of that draw.
+        preset: image size, mosaic, ``tonemap_eps`` (the sensor's log mapping) and the
+            ``threshold`` the solve starts from.
+        max_pixels: at most this many pixels (drawn at random) are replayed.
+        max_views: at most this many consecutive frames, from the first view, are replayed.
+        seed: random seed of the pixels' draw.
 
     Returns:
         The estimate, or ``None`` with the reason why none was made (no frames, unreadable
-        frames, too few pixels with events, or frames that do not explain the events).
+        frames, too few events, frames that fire nothing, or frames that do not explain the
+        events).
     """
-    from scipy.optimize import least_squares
-
-    from hybridneus.data.frames import load_frames
-    from hybridneus.data.mosaic import mosaic_weights
-    from hybridneus.data.windows import event_counter
     from hybridneus.errors import DatasetError
 
     if split.rgb_paths is None:
         return None, "no rgb/ frames"
-    n = split.n_views
-    if n < 2:
+    views = min(split.n_views, max_views)
+    if views < 2:
         return None, "fewer than two views"
-    span = max(1, min(span, n - 1))
-    starts = np.unique(np.linspace(0, n - 1 - span, num=max(1, n_pairs)).round().astype(int))
-    needed = sorted(set(starts) | set(starts + span))
+    h, w = preset.height, preset.width
+    rng = np.random.default_rng(seed)
+    pixels = np.sort(rng.choice(h * w, min(max_pixels, h * w), replace=False))
     try:
-        loaded = load_frames(split, preset.width, preset.height, [int(v) for v in needed])
+        log_frames, known = _log_frames(split, preset, views, pixels)
     except DatasetError as exc:
         return None, f"frames not usable ({exc})"
-    frames = dict(zip(needed, loaded, strict=True))
-    h, w = preset.height, preset.width
-    ys, xs = np.mgrid[0:h, 0:w]
-    weights = mosaic_weights(np.stack([xs.ravel(), ys.ravel()], axis=1), preset.mosaic)
     times = split.view_times
-    ev = split.events
-    pixel = ev.y.astype(np.int64) * w + ev.x
-    counter = event_counter(split)
-    columns = []
-    for i in starts:
-        j = i + span
-        # Events of the change from frame i to frame j carry times in (t_i, t_j]; the look-back
-        # before t_i finds each pixel's latest event before the window.
-        b0, i0, i1 = (int(np.searchsorted(ev.t, times[k], side="right"))
-                      for k in (max(i - span, 0), i, j))
-        counts = counter.counts(i0, i1)  # (pixels, 2): OFF, ON
-        before = _latest_polarity(pixel[b0:i0], ev.p[b0:i0], h * w)
-        after = _latest_polarity(pixel[i0:i1], ev.p[i0:i1], h * w)
-        a, b = frames[i].reshape(-1, 3), frames[j].reshape(-1, 3)
-        usable = ((counts.sum(axis=1) > 0) & (a.min(axis=1) > 4) & (b.min(axis=1) > 4)
-                  & (a.max(axis=1) < 251) & (b.max(axis=1) < 251))
-        dl = _log_brightness(frames[j], weights, preset.tonemap_eps) - _log_brightness(
-            frames[i], weights, preset.tonemap_eps)
-        # A pixel's brightness sits on average half a threshold past the level of its latest
-        # event, on that event's side: the window's ends add half an ON (OFF) threshold per
-        # end whose latest event was ON (OFF), with the start's counted negative.
-        on = counts[:, 1] + 0.5 * ((after == 1).astype(float) - (before == 1))
-        off = counts[:, 0] + 0.5 * ((after == -1).astype(float) - (before == -1))
-        columns.append(np.stack([dl, on, off], axis=1)[usable])
-    d, on, off = np.concatenate(columns).T
-    if d.size < MIN_PIXELS:
-        return None, f"only {d.size} pixels with events in frames neither black nor saturated"
-    if d.size > max_pixels:
-        keep = np.random.default_rng(seed).choice(d.size, max_pixels, replace=False)
-        d, on, off = d[keep], on[keep], off[keep]
-    # Least squares for a start, then a soft-L1 fit that hot pixels and noise events move less.
-    start, *_ = np.linalg.lstsq(np.stack([on, -off], axis=1), d, rcond=None)
-    scale = max(float(np.median(np.abs(d))), 1e-3)
-    fit = least_squares(lambda c: c[0] * on - c[1] * off - d, np.clip(start, 1e-3, None),
-                        loss="soft_l1", f_scale=scale, bounds=(1e-4, np.inf))
-    c_on, c_off = (float(v) for v in fit.x)
-    residual = c_on * on - c_off * off - d
-    explained = 1.0 - float(np.var(residual) / max(np.var(d), 1e-12))
+    on, off = _observed_counts(split, pixels, float(times[0]), float(times[views - 1]))
+    log_frames, on, off = log_frames[:, known], on[known], off[known]
+    if min(on.sum(), off.sum()) < MIN_EVENTS:
+        return None, (f"only {on.sum():.0f} ON and {off.sum():.0f} OFF events at pixels the "
+                      "frames show neither black nor saturated")
+    change = log_frames.max(axis=0) - log_frames.min(axis=0)
+    moving = change >= MIN_CHANGE  # (the others fire nothing at any threshold above it)
+    if moving.sum() < 100:
+        return None, "the frames do not change: a replay of them fires no events"
+    solved = _solve(log_frames[:, moving], on[moving].sum(), off[moving].sum(),
+                    float(preset.threshold))
+    if solved is None:
+        return None, "the frames do not change: a replay of them fires no events"
+    c_on, c_off = solved
+    # background activity: the rate at pixels that never move by half a threshold
+    still = change < 0.5 * min(c_on, c_off)
+    intervals = views - 1
+    rate_on = rate_off = 0.0
+    if still.sum() >= 100:
+        rate_on = float(on[still].mean()) / intervals
+        rate_off = float(off[still].mean()) / intervals
+    sim_on, sim_off = np.zeros_like(on), np.zeros_like(off)
+    sim_on[~still], sim_off[~still] = replay_counts(log_frames[:, ~still], c_on, c_off)
+    hot = (on + off) > HOT_FACTOR * (sim_on + sim_off) + HOT_SLACK
+    keep = ~hot & ~still
+    if keep.sum() < 100:
+        return None, "too few pixels whose brightness changes in the frames"
+    on_total = on[keep].sum() - rate_on * intervals * keep.sum()
+    off_total = off[keep].sum() - rate_off * intervals * keep.sum()
+    if min(on_total, off_total) <= 0:
+        return None, "the events at changing pixels are no more than the background activity"
+    solved = _solve(log_frames[:, keep], on_total, off_total, c_on)
+    if solved is None:
+        return None, "the frames do not change: a replay of them fires no events"
+    c_on, c_off = solved
+    sim_on, sim_off = replay_counts(log_frames[:, keep], c_on, c_off)
+    observed = np.concatenate([on[keep], off[keep]])
+    replayed = np.concatenate([sim_on, sim_off])
+    residual = observed - replayed - np.mean(observed - replayed)
+    explained = 1.0 - float(np.var(residual) / max(np.var(observed), 1e-12))
     if explained < MIN_EXPLAINED:
-        return None, (f"the frames explain only {100 * max(explained, 0):.0f}% of the events' "
-                      "changes (placeholders, or frames of another exposure or camera?)")
-    return ThresholdEstimate(c_on, c_off, explained, int(d.size)), ""
+        return None, (f"a replay of the frames explains only {100 * max(explained, 0):.0f}% of "
+                      "the pixels' event counts (placeholders, or frames of another exposure "
+                      "or camera?)")
+    return ThresholdEstimate(c_on, c_off, explained, int(keep.sum()), views,
+                             0.5 * (rate_on + rate_off)), ""
