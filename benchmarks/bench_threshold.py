@@ -19,6 +19,7 @@ the estimated C within 5% of the truth, the ON/OFF thresholds recovered, and the
 within 1.1x of the fit told the truth.
 
     python benchmarks/bench_threshold.py --scene bunny --iters 2000
+    python benchmarks/bench_threshold.py --scene generated:blob:784857333 --no-fit
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import argparse
 import json
 import shutil
 import sys
+import time
 from pathlib import Path
 
 import common
@@ -81,6 +83,8 @@ def main() -> None:
     ap.add_argument("--arms", nargs="+", default=["told", "estimated", "high", "low"],
                     choices=["told", "estimated", "high", "low"],
                     help="the fits to run (told is always run: the others' reference)")
+    ap.add_argument("--no-fit", action="store_true",
+                    help="only the estimate from the frames against the truth, no fits")
     common.add_arguments(ap, "threshold")
     args = ap.parse_args()
     common.check_tree(args)
@@ -93,7 +97,7 @@ def main() -> None:
             ("low", unstated, (f"data.threshold={truth * (1 - args.wrong):.6f}",)))
     scores, taken = {}, {}
     for name, folder, sets in arms:
-        if name != "told" and name not in args.arms:
+        if args.no_fit or (name != "told" and name not in args.arms):
             continue
         run_dir = fit(args, f"{args.scene}-threshold-{name}", folder, sets)
         scores[name] = score(args, run_dir, folder)
@@ -105,22 +109,25 @@ def main() -> None:
     from hybridneus.data.threshold import estimate_thresholds
 
     data = load_dataset(unstated, splits="train")
+    started = time.perf_counter()
     found, why = estimate_thresholds(data["train"], data.preset)
+    seconds = time.perf_counter() - started
     if found is None:
         raise SystemExit(f"[threshold] no estimate from the frames: {why}")
     c, o = found.threshold, found.polarity_offset
     on, off = c * (1 + o), c * (1 - o)
-    base = scores["told"]["chamfer"]
+    base = scores["told"]["chamfer"] if scores else None
     line = {"bench": "threshold", **common.stamp(args.threads), "scene": args.scene,
             "views": args.views, "size": f"{args.width}x{args.height}",
             "true": {"on": args.on, "off": args.off, "threshold": truth},
             "estimated": {"on": round(on, 5), "off": round(off, 5), "threshold": round(c, 5),
-                          "polarity_offset": round(o, 4), "explained": round(found.explained, 4)},
+                          "polarity_offset": round(o, 4), "explained": round(found.explained, 4),
+                          "seconds": round(seconds, 1)},
             "threshold_error": round(c / truth - 1, 4),
             "on_error": round(on / args.on - 1, 4), "off_error": round(off / args.off - 1, 4),
             "preset": args.preset, "iters": args.iters, "seed": args.seed,
             "wrong": args.wrong, "taken": taken,
-            "ratios": {k: round(v["chamfer"] / base, 3) for k, v in scores.items()},
+            "ratios": {k: round(v["chamfer"] / base, 3) for k, v in scores.items()} if base else {},
             "fits": scores}
     common.append(args.out, line)
     print(json.dumps({k: v for k, v in line.items() if k != "machine"}))

@@ -431,8 +431,9 @@ def threshold_section(rows: list[dict]) -> list[str]:
            "states neither C nor the polarity offset, fitted with the same preset, seed and "
            "steps: told the truth; unstated, so that the fit takes both from the frames "
            "(`estimate.threshold`); told a C off by the given share (the offset from the "
-           "events' balance). Targets: estimated C within 5% of the truth, Chamfer within "
-           "1.1x of the fit told the truth.", "",
+           "events' balance). Lines without fits (`--no-fit`) measure the estimate alone. "
+           "Targets: estimated C within 5% of the truth, Chamfer within 1.1x of the fit told "
+           "the truth.", "",
            "| scene | views | true ON / OFF | estimated ON / OFF (C error) | steps | CD told | "
            "estimated / told | wrong C / told | commit | machine | date |",
            "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -441,9 +442,10 @@ def threshold_section(rows: list[dict]) -> list[str]:
         wrong = ", ".join(f"{'+' if k == 'high' else '-'}{100 * r['wrong']:.0f}%: {ratios[k]:.3f}"
                           for k in ("high", "low") if k in ratios)
         est = "-" if "estimated" not in ratios else f"{ratios['estimated']:.3f}"
+        told = _f(r["fits"]["told"]["chamfer"]) if "told" in r["fits"] else "-"
         out.append(f"| {r['scene']} | {r['views']} {r['size']} | {t['on']:g} / {t['off']:g} | "
                    f"{e['on']:.4f} / {e['off']:.4f} ({100 * r['threshold_error']:+.1f}%) | "
-                   f"{r['iters']} | {_f(r['fits']['told']['chamfer'])} | {est} | "
+                   f"{r['iters'] if r['fits'] else '-'} | {told} | {est} | "
                    f"{wrong or '-'} | {r['commit']} | {_cpu(r)} | {r['date'][:10]} |")
     commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
     return out + ["", "  \n".join(commands), ""]
