@@ -239,13 +239,20 @@ def test_a_comparison_started_again_skips_the_fits_it_has(tmp_path):
     import compare_commits
 
     out = tmp_path / "suite.jsonl"
-    args = argparse.Namespace(out=out, minutes=15.0)
+    args = argparse.Namespace(out=out, minutes=15.0, iters=None)
     assert compare_commits.done(args) == set()
     ours = {"bench": "suite", "commit": "abc1234", "scene": "bunny", "seed": 1, "minutes": 15.0,
             "command": "python benchmarks/compare_commits.py abc1234 def5678 (fits ...)"}
     common.append(out, ours)
     common.append(out, {**ours, "seed": 2, "minutes": 1.0})  # another comparison's length
     common.append(out, {**ours, "seed": 0, "command": "python benchmarks/run_suite.py"})
+    assert compare_commits.done(args) == {("abc1234", "bunny", 1)}
+    # a fixed schedule's comparison counts only the fits of its own length
+    fixed = argparse.Namespace(out=out, minutes=15.0, iters=2000)
+    assert compare_commits.done(fixed) == set()
+    common.append(out, {**ours, "seed": 3, "minutes": None, "iters": 2000})
+    common.append(out, {**ours, "seed": 4, "minutes": None, "iters": 4500})
+    assert compare_commits.done(fixed) == {("abc1234", "bunny", 3)}
     assert compare_commits.done(args) == {("abc1234", "bunny", 1)}
 
 

@@ -6,11 +6,11 @@ once and serves the offset estimate; the event silhouettes are outlined once and
 the crop and the hull prior (they are cached on the event stream). The values taken, with one
 line each on how, go into the run's ``scene.yaml``; ``hybridneus info`` prints the same.
 
-- **Threshold** (:mod:`hybridneus.data.threshold`, off by default: still wrong on a full-size
-  scene, docs/data.md): ON and OFF thresholds fitted to the
-  log-brightness changes between the split's ``rgb/`` frames, when neither the path,
-  ``scene.json`` nor the config states C, a tonemap eps is stated (the frames' log mapping)
-  and the frames explain the events (the events alone fix only the ON/OFF ratio). Without usable frames the preset's C stays, and a line says so.
+- **Threshold** (:mod:`hybridneus.data.threshold`, off by default): the ON and OFF thresholds
+  whose replay of the sensor over the split's ``rgb/`` frames fires the stream's events, when
+  neither the path, ``scene.json`` nor the config states C, a tonemap eps is stated (the
+  frames' log mapping) and the replay explains the events (the events alone fix only the
+  ON/OFF ratio). Without usable frames the preset's C stays, and a line says so.
 - **Polarity offset** (:mod:`hybridneus.data.balance`): the median per-pixel polarity balance
   after the noise filter, when neither the path, ``scene.json`` nor the config states an
   offset. A stated one that the events contradict gets a warning.
