@@ -302,6 +302,7 @@ class RefineConfig:
     pose_lr: float = 0.0005  # Adam learning rate of the corrections (radians, world units)
     pose_start: float = 0.5  # fraction of training before which the corrections stay zero
     pose_weight: float = 0.01  # weight of the corrections' mean square (keeps them small)
+    pose_gauge: bool = False  # take the track's common shift, turn and scale out of the corrections
 
 
 @dataclass

@@ -19,6 +19,13 @@ moves every view along the given track: to first order the pose at ``k + tau`` i
 [R(tau w_k) | tau v_k]``, with ``(w_k, v_k)`` the camera-frame motion from view ``k`` to
 ``k + 1``, and its 6-vector adds to the knots'.
 
+The corrections and the field can move together: shift, turn or scale every camera and the
+field with them, and the events are the same. ``refine.pose_gauge`` takes that part out after
+every step (:meth:`PoseCorrections.remove_gauge`): the linearised similarity transform
+(rotation, translation, scale) that best explains the corrected track against the given one is
+projected out of the knots, so the corrections keep only what moves the cameras against each
+other.
+
 Rays made from the given poses are moved onto the corrected ones in torch, so the event loss's
 gradient reaches the corrections. Rotations use :func:`so3_exp` (Rodrigues' formula, with its
 Taylor series near zero so that the gradient at the identity is exact); ``tests/test_poses.py``
@@ -90,16 +97,49 @@ class PoseCorrections(torch.nn.Module):
     """
 
     def __init__(self, n_views: int, knots: int = 0,
-                 clock_track: np.ndarray | None = None) -> None:
+                 clock_track: np.ndarray | None = None,
+                 gauge_track: np.ndarray | None = None) -> None:
         super().__init__()
         self.n_views = n_views
         self.n_knots = n_views if knots <= 0 else min(knots, n_views)
         self.delta = torch.nn.Parameter(torch.zeros(self.n_knots, 6))
+        if gauge_track is None:
+            self.gauge = None
+        else:
+            # derived from the given poses: rebuilt, never saved in a checkpoint
+            self.register_buffer("gauge", torch.as_tensor(
+                gauge_map(gauge_track, self.knot_weights()), dtype=torch.float32),
+                persistent=False)
         self.clock = None
         if clock_track is not None:
             self.clock = torch.nn.Parameter(torch.zeros(1))
             self.register_buffer("motion",
                                  torch.as_tensor(track_motion(clock_track), dtype=torch.float32))
+
+    def knot_weights(self) -> np.ndarray:
+        """(n_views, n_knots) weights of each view's correction on the knots (linear)."""
+        weights = np.zeros((self.n_views, self.n_knots))
+        for k in range(self.n_views):
+            if self.n_knots == 1:
+                weights[k, 0] = 1.0
+                continue
+            s = k * (self.n_knots - 1) / max(self.n_views - 1, 1)
+            a = min(int(np.floor(s)), self.n_knots - 1)
+            b = min(a + 1, self.n_knots - 1)
+            weights[k, a] += 1.0 - (s - a)
+            weights[k, b] += s - a
+        return weights
+
+    def remove_gauge(self) -> None:
+        """Project the knots onto corrections whose track has no common similarity transform
+        against the given one (see the module docstring); nothing without a gauge map."""
+        if self.gauge is None:
+            return
+        with torch.no_grad():
+            g = self.gauge  # (7, n_knots * 6)
+            d = self.delta.reshape(-1)
+            coef = torch.linalg.pinv(g @ g.T) @ (g @ d)
+            self.delta -= (g.T @ coef).reshape(self.delta.shape)
 
     def _knot_at(self, view: float) -> torch.Tensor:
         if self.n_knots == 1:
@@ -144,6 +184,39 @@ class PoseCorrections(torch.nn.Module):
         return np.asarray(c2w, dtype=np.float64) @ corr.numpy()
 
 
+def gauge_map(c2w: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(7, n_knots * 6) linear map from the knots (flattened, rotation then translation per
+    knot) to the similarity transform their corrections make of the whole track, to first
+    order: the world rotation ``q``, translation ``t`` and scale ``sigma`` that best explain
+    every view's world-frame turn ``R_k w_k`` (as ``q``) and centre shift ``R_k v_k`` (as
+    ``q x c_k + t + sigma c_k``), by least squares over the views.
+
+    Args:
+        c2w: (n_views, 4, 4) the given poses.
+        weights: (n_views, n_knots) each view's weights on the knots.
+    """
+    c2w = np.asarray(c2w, dtype=np.float64)
+    n, k = weights.shape
+    rot, centre = c2w[:, :3, :3], c2w[:, :3, 3]
+    a = np.zeros((n, 6, 7))  # the transform's effect on each view's (turn, shift)
+    a[:, :3, :3] = np.eye(3)
+    cx = np.zeros((n, 3, 3))  # q x c = -[c]x q
+    cx[:, 0, 1], cx[:, 0, 2] = centre[:, 2], -centre[:, 1]
+    cx[:, 1, 0], cx[:, 1, 2] = -centre[:, 2], centre[:, 0]
+    cx[:, 2, 0], cx[:, 2, 1] = centre[:, 1], -centre[:, 0]
+    a[:, 3:, :3] = cx
+    a[:, 3:, 3:6] = np.eye(3)
+    a[:, 3:, 6] = centre
+    normal = np.einsum("nij,nik->jk", a, a)
+    # each view's world (turn, shift) is diag(R, R) times its camera-frame correction
+    block = np.zeros((n, 6, 6))
+    block[:, :3, :3] = rot
+    block[:, 3:, 3:] = rot
+    per_view = np.einsum("nji,njk->nik", a, block)  # (n, 7, 6): A_n^T diag(R_n, R_n)
+    rhs = np.einsum("nk,nij->ikj", weights, per_view).reshape(7, k * 6)
+    return np.linalg.pinv(normal) @ rhs
+
+
 class PoseOptimizer:
     """Adam for the corrections: lazy (sparse) for the knots, since a batch touches only the
     few knots around its window's two ends and dense Adam's momentum would go on moving every
@@ -169,6 +242,7 @@ class PoseOptimizer:
             delta.grad = grad.to_sparse(1)  # only the batch's knots move
             self.knots.step()
             delta.grad = None
+            self.poses.remove_gauge()
         if self.clock is not None:
             if learn and self.poses.clock.grad is not None:
                 self.clock.step()

@@ -127,7 +127,8 @@ class Trainer:
             rf = cfg.refine
             self.poses = PoseCorrections(
                 self.split.n_views, rf.pose_knots,
-                self.split.c2w if rf.clock_offset else None).to(self.device)
+                self.split.c2w if rf.clock_offset else None,
+                self.split.c2w if rf.pose_gauge else None).to(self.device)
             self.pose_optimizer = PoseOptimizer(self.poses, rf.pose_lr, tuple(cfg.train.betas))
             self.params.extend(self.poses.parameters())
         self.priors = build_priors(cfg, self.field, self.split, self.aabb, self.device)
