@@ -65,19 +65,9 @@ def rare_fill(field, cameras: np.ndarray, base, share: float, close: float, stri
     return region_space(fill, grid, base.hidden, base.cameras)
 
 
-def truth_scene(gt):
-    """An Open3D ``RaycastingScene`` of the ground-truth mesh ``gt`` (for occupancy)."""
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(gt.vertices, np.float32)),
-                        o3d.core.Tensor(np.asarray(gt.faces, np.uint32)))
-    return scene
-
-
 def inside_share(added: np.ndarray, grid, truth) -> float | None:
-    """Share of the voxels ``added`` (bool, on ``grid``) inside the mesh of ``truth``
-    (:func:`truth_scene`)."""
+    """Share of the voxels ``added`` (bool, on ``grid``) inside the mesh of ``truth`` (its
+    :func:`hybridneus.evaluation.inside.raycasting_scene`)."""
     import open3d as o3d
 
     idx = np.argwhere(added)
@@ -102,6 +92,7 @@ def main() -> None:
     import yaml
 
     from hybridneus.evaluation.geometry import chamfer_distance
+    from hybridneus.evaluation.inside import raycasting_scene
     from hybridneus.meshing import extract_mesh
     from hybridneus.meshing import unseen as U
     from hybridneus.meshing.extract import _examined_box
@@ -111,7 +102,7 @@ def main() -> None:
         config = yaml.safe_load((run / "config.yaml").read_text())
         dataset = Path(config["data"]["path"])
         gt = trimesh.load(dataset / "gt_mesh.ply", force="mesh")
-        truth = truth_scene(gt)
+        truth = raycasting_scene(gt)
         field = load_field(run, device="cpu")
         cameras = load_cameras(run)
         base = U.unseen_space(field, cameras, _examined_box(field, None, None))

@@ -45,6 +45,8 @@ MIN_EXPLAINED = 0.5
 MIN_EVENTS = 2000
 #: Frame values (of 255) at or beyond which a pixel's brightness is not known: black, saturated.
 DARK, BRIGHT = 4, 251
+#: Why no estimate is made from frames whose replay fires nothing.
+STILL_FRAMES = "the frames do not change: a replay of them fires no events"
 #: Pixels whose log brightness spans less than this are left out of the first solve.
 MIN_CHANGE = 0.02
 #: A pixel is hot when it fires more than this many times its replay's events (plus
@@ -240,11 +242,11 @@ def estimate_thresholds(
     change = log_frames.max(axis=0) - log_frames.min(axis=0)
     moving = change >= MIN_CHANGE  # (the others fire nothing at any threshold above it)
     if moving.sum() < 100:
-        return None, "the frames do not change: a replay of them fires no events"
+        return None, STILL_FRAMES
     solved = _solve(log_frames[:, moving], on[moving].sum(), off[moving].sum(),
                     float(preset.threshold))
     if solved is None:
-        return None, "the frames do not change: a replay of them fires no events"
+        return None, STILL_FRAMES
     c_on, c_off = solved
     # background activity: the rate at pixels that never move by half a threshold
     still = change < 0.5 * min(c_on, c_off)
@@ -265,7 +267,7 @@ def estimate_thresholds(
         return None, "the events at changing pixels are no more than the background activity"
     solved = _solve(log_frames[:, keep], on_total, off_total, c_on)
     if solved is None:
-        return None, "the frames do not change: a replay of them fires no events"
+        return None, STILL_FRAMES
     c_on, c_off = solved
     sim_on, sim_off = replay_counts(log_frames[:, keep], c_on, c_off)
     observed = np.concatenate([on[keep], off[keep]])

@@ -145,7 +145,7 @@ def winding_number(
     return out.numpy()
 
 
-def _raycasting_scene(mesh: trimesh.Trimesh):
+def raycasting_scene(mesh: trimesh.Trimesh):
     """An Open3D RaycastingScene holding ``mesh``."""
     import open3d as o3d
 
@@ -161,7 +161,7 @@ def ray_votes(mesh: trimesh.Trimesh, points: np.ndarray, n_rays: int = 7, seed: 
     """Fraction (n_points,) of ``n_rays`` random rays from each point crossing the mesh oddly."""
     import open3d as o3d
 
-    scene = _raycasting_scene(mesh)
+    scene = raycasting_scene(mesh)
     rng = np.random.default_rng(seed)
     dirs = rng.normal(size=(n_rays, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -195,7 +195,7 @@ def unsigned_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
     """Distance (n_points,) float64 from ``points`` (n_points, 3) to the closest surface point."""
     import open3d as o3d
 
-    scene = _raycasting_scene(mesh)
+    scene = raycasting_scene(mesh)
     query = o3d.core.Tensor(np.ascontiguousarray(points, dtype=np.float32))
     return scene.compute_distance(query).numpy().astype(np.float64)
 

@@ -106,28 +106,35 @@ class PoseCorrections(torch.nn.Module):
         if gauge_track is None:
             self.gauge = None
         else:
-            # derived from the given poses: rebuilt, never saved in a checkpoint
-            self.register_buffer("gauge", torch.as_tensor(
-                gauge_map(gauge_track, self.knot_weights()), dtype=torch.float32),
-                persistent=False)
+            # derived from the given poses: rebuilt, never saved in a checkpoint; the
+            # projection's (7, 7) solve is fixed too, so it is made once, not every step
+            g = gauge_map(gauge_track, self.knot_weights())
+            self.register_buffer("gauge", torch.as_tensor(g, dtype=torch.float32),
+                                 persistent=False)
+            self.register_buffer("gauge_solve", torch.as_tensor(
+                np.linalg.pinv(g @ g.T) @ g, dtype=torch.float32), persistent=False)
         self.clock = None
         if clock_track is not None:
             self.clock = torch.nn.Parameter(torch.zeros(1))
             self.register_buffer("motion",
                                  torch.as_tensor(track_motion(clock_track), dtype=torch.float32))
 
+    def _knots_around(self, view: float) -> tuple[int, int, float]:
+        """The two knots a continuous view index lies between, and its weight on the second."""
+        if self.n_knots == 1:
+            return 0, 0, 0.0
+        s = min(max(float(view), 0.0), self.n_views - 1.0) * (self.n_knots - 1) / max(
+            self.n_views - 1, 1)
+        a = min(int(np.floor(s)), self.n_knots - 1)
+        return a, min(a + 1, self.n_knots - 1), s - a
+
     def knot_weights(self) -> np.ndarray:
         """(n_views, n_knots) weights of each view's correction on the knots (linear)."""
         weights = np.zeros((self.n_views, self.n_knots))
         for k in range(self.n_views):
-            if self.n_knots == 1:
-                weights[k, 0] = 1.0
-                continue
-            s = k * (self.n_knots - 1) / max(self.n_views - 1, 1)
-            a = min(int(np.floor(s)), self.n_knots - 1)
-            b = min(a + 1, self.n_knots - 1)
-            weights[k, a] += 1.0 - (s - a)
-            weights[k, b] += s - a
+            a, b, w = self._knots_around(k)
+            weights[k, a] += 1.0 - w
+            weights[k, b] += w
         return weights
 
     def remove_gauge(self) -> None:
@@ -135,20 +142,12 @@ class PoseCorrections(torch.nn.Module):
         against the given one (see the module docstring); nothing without a gauge map."""
         if self.gauge is None:
             return
-        with torch.no_grad():
-            g = self.gauge  # (7, n_knots * 6)
-            d = self.delta.reshape(-1)
-            coef = torch.linalg.pinv(g @ g.T) @ (g @ d)
-            self.delta -= (g.T @ coef).reshape(self.delta.shape)
+        with torch.no_grad():  # gauge: (7, n_knots * 6); gauge_solve: pinv(g g^T) g
+            coef = self.gauge_solve @ self.delta.reshape(-1)
+            self.delta -= (self.gauge.T @ coef).reshape(self.delta.shape)
 
     def _knot_at(self, view: float) -> torch.Tensor:
-        if self.n_knots == 1:
-            return self.delta[0]
-        s = min(max(float(view), 0.0), self.n_views - 1.0) * (self.n_knots - 1) / max(
-            self.n_views - 1, 1)
-        a = min(int(np.floor(s)), self.n_knots - 1)
-        b = min(a + 1, self.n_knots - 1)
-        w = s - a
+        a, b, w = self._knots_around(view)
         return self.delta[a] if w == 0.0 else (1.0 - w) * self.delta[a] + w * self.delta[b]
 
     def at(self, view: float) -> torch.Tensor:
