@@ -6,7 +6,9 @@ falls on both alike; started again, it skips the fits already in ``--out``. Each
 from a worktree of its own (its benchmarks/run_suite.py and its package, from a tree of links
 laid out as pyproject.toml maps it, so nothing is installed and later commits to this checkout
 change nothing mid-run); their lines are added to benchmarks/results/suite.jsonl in today's
-format. ``python benchmarks/report.py --compare BASE NEW`` then pairs them.
+format. ``python benchmarks/report.py --compare BASE NEW`` then pairs them. With ``--iters``
+(a schedule that repeats exactly on a CPU) ``--jobs 2`` runs two fits at a time, each on its
+``--threads``: the scores are those of fits run alone, their wall times are not.
 
     python benchmarks/compare_commits.py cf67ae4 --seeds 0 1 2
     python benchmarks/compare_commits.py cf67ae4 --scenes none --generated 6 --generated-seed 2026
@@ -21,12 +23,16 @@ import json
 import os
 import subprocess
 import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import common
 import run_suite
 
 WORK = Path("/tmp/hybridneus-compare")
+#: Held while a worktree is made or a line is added, which fits running side by side share.
+_SHARED = threading.Lock()
 
 
 def worktree(commit: str) -> tuple[Path, Path]:
@@ -49,8 +55,10 @@ def worktree(commit: str) -> tuple[Path, Path]:
 def run_at(args, commit: str, name: str, seed: int) -> None:
     """One fit at ``commit`` with that commit's own suite; its line added in today's format
     (suites older than benchmarks/common.py wrote another; seeds came as ``--set``)."""
-    tree, site = worktree(commit)
-    out = WORK / f"{commit}-lines.jsonl"
+    with _SHARED:
+        tree, site = worktree(commit)
+    # a file per fit: fits running side by side must not read each other's lines
+    out = WORK / f"{commit}-{name}-s{seed}-lines.jsonl"
     before = len(common.read_lines(out))
     seeded = (["--seeds", str(seed)] if (tree / "benchmarks" / "common.py").is_file()
               else ["--set", f"train.seed={seed}"])
@@ -70,7 +78,8 @@ def run_at(args, commit: str, name: str, seed: int) -> None:
                      "preset": "fast", "overrides": [], "iters": args.iters,
                      "command": f"python benchmarks/compare_commits.py {args.base} {args.new} "
                      f"(fits with the commit's run_suite.py {' '.join(cmd[2:])})"}
-        common.append(args.out, converted)
+        with _SHARED:
+            common.append(args.out, converted)
         print(f"[compare] {commit} {name} seed {seed}: CD {line.get('chamfer')}",
               file=sys.stderr, flush=True)
 
@@ -101,10 +110,14 @@ def main() -> None:
                         "of a budget: it repeats exactly on a CPU, so pairs differ by the commits "
                         "alone and may run beside other work")
     ap.add_argument("--threads", type=int, default=2, help="torch threads per fit")
+    ap.add_argument("--jobs", type=int, default=1, help="fits run at a time (more than 1 only "
+                    "with --iters: a budgeted fit's length depends on the machine's pace)")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
     ap.add_argument("--out-runs", type=Path, default=WORK / "runs")
     common.add_arguments(ap, "suite")
     args = ap.parse_args()
+    if args.jobs < 1 or (args.jobs > 1 and not args.iters):
+        ap.error("--jobs must be 1, or more with --iters")
     args.base, args.new = (common.short_commit(c) for c in (args.base, args.new))
     assets = run_suite.find_assets(args.assets)
     sources = list(assets) if args.scenes is None else [s for s in args.scenes if s != "none"]
@@ -120,7 +133,7 @@ def main() -> None:
         run_suite.dataset_for(source, assets, sim)
     args.out_runs.mkdir(parents=True, exist_ok=True)
     have = done(args)
-    k = 0
+    fits, k = [], 0
     for seed in args.seeds:  # seed-major: a comparison cut short still covers every scene
         for name in names:
             for commit in ([args.base, args.new] if k % 2 == 0 else [args.new, args.base]):
@@ -128,8 +141,10 @@ def main() -> None:
                     print(f"[compare] {commit} {name} seed {seed}: in {args.out} already",
                           file=sys.stderr, flush=True)
                     continue
-                run_at(args, commit, name, seed)
+                fits.append((commit, name, seed))
             k += 1
+    with ThreadPoolExecutor(max_workers=args.jobs) as pool:  # in order, jobs at a time
+        list(pool.map(lambda fit: run_at(args, *fit), fits))
     print(json.dumps({"pairs": k, "base": args.base, "new": args.new}))
 
 
