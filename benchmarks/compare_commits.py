@@ -5,9 +5,10 @@ by default), one after the other, alternating which goes first, so that the mach
 falls on both alike; started again, it skips the fits already in ``--out``. Each commit runs
 from a worktree of its own (its benchmarks/run_suite.py and its package, from a tree of links
 laid out as pyproject.toml maps it, so nothing is installed and later commits to this checkout
-change nothing mid-run); their lines are added to benchmarks/results/suite.jsonl in today's
-format. ``python benchmarks/report.py --compare BASE NEW`` then pairs them. With ``--iters``
-(a schedule that repeats exactly on a CPU) ``--jobs 2`` runs two fits at a time, each on its
+change nothing mid-run) and only fits; this checkout's suite scores every fit, so a pair
+differs by the fitted code alone. Their lines are added to benchmarks/results/suite.jsonl.
+``python benchmarks/report.py --compare BASE NEW`` then pairs them. With ``--iters`` (a
+schedule that repeats exactly on a CPU) ``--jobs 2`` runs two fits at a time, each on its
 ``--threads``: the scores are those of fits run alone, their wall times are not.
 
     python benchmarks/compare_commits.py cf67ae4 --seeds 0 1 2
@@ -53,29 +54,39 @@ def worktree(commit: str) -> tuple[Path, Path]:
 
 
 def run_at(args, commit: str, name: str, seed: int) -> None:
-    """One fit at ``commit`` with that commit's own suite; its line added in today's format
-    (suites older than benchmarks/common.py wrote another; seeds came as ``--set``)."""
+    """One fit at ``commit`` with that commit's own suite (``--fit-only``), scored by this
+    checkout's suite: both commits of a pair are measured with the same ruler, whatever
+    each commit's scoring was (meshes over the crop's box since ``"volume": "crop"``)."""
     with _SHARED:
         tree, site = worktree(commit)
-    # a file per fit: fits running side by side must not read each other's lines
-    out = WORK / f"{commit}-{name}-s{seed}-lines.jsonl"
-    before = len(common.read_lines(out))
-    seeded = (["--seeds", str(seed)] if (tree / "benchmarks" / "common.py").is_file()
-              else ["--set", f"train.seed={seed}"])
+    suite = tree / "benchmarks" / "run_suite.py"
+    if "--fit-only" not in suite.read_text():
+        raise SystemExit(f"error: {commit}: its run_suite.py cannot fit without scoring "
+                         "(--fit-only); compare later commits")
+    # a folder and a file per fit: fits running side by side must not take each other's
+    runs = args.out_runs / f"{commit}-{name}-s{seed}"
     budget = (["--iters", str(args.iters)] if args.iters else ["--minutes", str(args.minutes)])
-    cmd = [sys.executable, str(tree / "benchmarks" / "run_suite.py"), "--scenes", name,
-           "--presets", "fast", *budget, *seeded, "--threads", str(args.threads),
-           "--assets", str(args.assets), "--cache", str(args.cache), "--out-runs",
-           str(args.out_runs), "--out", str(out), "--curve", "2", "--image-views", "0"]
+    cmd = [sys.executable, str(suite), "--scenes", name, "--presets", "fast", *budget,
+           "--seeds", str(seed), "--threads", str(args.threads), "--assets", str(args.assets),
+           "--cache", str(args.cache), "--out-runs", str(runs), "--curve", "2",
+           "--image-views", "0", "--fit-only"]
     # the site first: the worktree's package, not the one installed from this checkout
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(tree / "benchmarks")])}
     subprocess.run(cmd, env=env, cwd=tree, check=False, stdout=subprocess.DEVNULL)
-    for line in common.read_lines(out)[before:]:
-        stamped = str(line.get("commit", "unknown"))
-        converted = {"bench": "suite", "machine": common.machine("cpu"), **line,
-                     "commit": stamped.removesuffix("+dirty"),
-                     "dirty": line.get("dirty", stamped.endswith("+dirty")), "seed": seed,
-                     "preset": "fast", "overrides": [], "iters": args.iters,
+    fitted = sorted((f.parent for f in runs.glob("*/fit.json")), key=lambda d: d.stat().st_mtime)
+    if not fitted:
+        print(f"[compare] {commit} {name} seed {seed}: the fit failed; skipped",
+              file=sys.stderr, flush=True)
+        return
+    scored = WORK / f"{commit}-{name}-s{seed}-lines.jsonl"
+    before = len(common.read_lines(scored))
+    score = [sys.executable, str(Path(__file__).with_name("run_suite.py")), "--score-runs",
+             str(fitted[-1]), "--cache", str(args.cache), "--threads", str(args.threads),
+             "--out", str(scored), *(["--allow-dirty"] if args.allow_dirty else [])]
+    subprocess.run(score, check=False, stdout=subprocess.DEVNULL)
+    for line in common.read_lines(scored)[before:]:
+        converted = {**line, "seed": seed, "preset": "fast", "overrides": [],
+                     "iters": args.iters,
                      "command": f"python benchmarks/compare_commits.py {args.base} {args.new} "
                      f"(fits with the commit's run_suite.py {' '.join(cmd[2:])})"}
         with _SHARED:
@@ -90,6 +101,7 @@ def done(args) -> set[tuple[str, str, int]]:
     return {(x["commit"], x["scene"], x["seed"]) for x in common.read_lines(args.out)
             if x.get("bench") == "suite" and (x.get("iters") == args.iters if args.iters
                                               else x.get("minutes") == args.minutes)
+            and x.get("volume") == "crop"  # the older lines were scored with another ruler
             and "compare_commits.py" in str(x.get("command", ""))}
 
 

@@ -3,9 +3,9 @@
 :func:`fit_run` trains and keeps snapshots of the field along the way (``snapshots/``) plus
 ``fit.json``; :func:`score_run` needs nothing else, so a fit made on another machine (a GPU
 host without the meshing libraries) is scored here from those files alone. Meshes are scored
-by the paper's Chamfer protocol as ``hybridneus mesh`` makes them (unseen pockets filled,
-cavities removed), and also without each of those two clean-ups, which prices them without
-another fit.
+by the paper's Chamfer protocol as ``hybridneus mesh`` makes them (``res`` points across the
+crop's box, unseen pockets filled, cavities removed), and also without each of those two
+clean-ups, which prices them without another fit.
 """
 
 from __future__ import annotations
@@ -207,7 +207,9 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     unfilled, _ = _score(field, gt, res)
     cavities, _ = _score(field, gt, res, cameras, keep_cavities=True)
     ungrouped, ungrouped_mesh = _score(field, gt, res, cameras, component_gap=0.0)
-    report = {**info, "run": str(run_dir), "res": res, **final, "curve": curve,
+    # "volume": res points span the field's crop box, as in `hybridneus mesh`; lines
+    # without it were meshed over the whole cube [-1, 1]^3, with voxels 2-3x larger
+    report = {**info, "run": str(run_dir), "res": res, "volume": "crop", **final, "curve": curve,
               "chamfer_unfilled": unfilled["chamfer"], "chamfer_cavities": cavities["chamfer"],
               "chamfer_ungrouped": ungrouped["chamfer"]}
     if mesh is not None and len(mesh.faces):

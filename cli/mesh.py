@@ -135,11 +135,7 @@ def mesh(
     if fill and cameras is None:
         typer.echo(f"{run_dir}: no camera poses saved or found; unseen space left as it is")
 
-    crop = None
-    crop_values = getattr(field, "crop", None)
-    if crop_values is not None:
-        r, y0, y1 = (float(v) for v in crop_values)
-        crop = CropVolume(r, y0, y1)
+    crop = CropVolume.of_field(field)
     options = PostprocessOptions(
         enabled=not no_postprocess,
         min_component_diameter=min_component or None,

@@ -242,8 +242,12 @@ def test_a_comparison_started_again_skips_the_fits_it_has(tmp_path):
     args = argparse.Namespace(out=out, minutes=15.0, iters=None)
     assert compare_commits.done(args) == set()
     ours = {"bench": "suite", "commit": "abc1234", "scene": "bunny", "seed": 1, "minutes": 15.0,
+            "volume": "crop",
             "command": "python benchmarks/compare_commits.py abc1234 def5678 (fits ...)"}
     common.append(out, ours)
+    old_ruler = {**ours, "seed": 5}
+    del old_ruler["volume"]  # meshed over the whole cube: not this comparison's score
+    common.append(out, old_ruler)
     common.append(out, {**ours, "seed": 2, "minutes": 1.0})  # another comparison's length
     common.append(out, {**ours, "seed": 0, "command": "python benchmarks/run_suite.py"})
     assert compare_commits.done(args) == {("abc1234", "bunny", 1)}

@@ -8,6 +8,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from hybridneus.meshing import (
+    DEFAULT_BOUNDS,
     CropVolume,
     ExtractionStats,
     PostprocessOptions,
@@ -115,6 +116,28 @@ def test_trim_crop_removes_only_the_cap_the_crop_cuts():
     assert len(extract_mesh(inner, res=64, crop=crop, progress=False).faces) == len(
         extract_mesh(inner, res=64, crop=crop, progress=False,
                      postprocess=PostprocessOptions(trim_crop=True)).faces)
+
+
+def test_a_cropped_field_is_meshed_over_its_own_crop_by_default():
+    """extract_mesh(field) meshes what `hybridneus mesh` does: res points across the field's
+    crop box (grown by 2% on each side), not across the whole cube, whose voxels would be
+    3.2 times larger here."""
+    crop = CropVolume(0.3, -0.3, 0.3)
+    field = _SphereCutByCrop(0.25, crop)
+    own = CropVolume.of_field(field)  # read from the field's float32 buffer
+    assert (own.r, own.y_min, own.y_max) == pytest.approx((0.3, -0.3, 0.3))
+    assert CropVolume.of_field(SphereField(0.25)) is None
+    stats, given = ExtractionStats(), ExtractionStats()
+    mesh = extract_mesh(field, res=64, progress=False, stats=stats)
+    same = extract_mesh(field, res=64, crop=own, progress=False, stats=given)
+    assert stats.voxel == pytest.approx(0.6 * 1.04 / 63) and stats.voxel == given.voxel
+    assert np.array_equal(mesh.vertices, same.vertices)
+    cube = ExtractionStats()
+    extract_mesh(field, res=64, bounds=DEFAULT_BOUNDS, progress=False, stats=cube)
+    assert cube.voxel == pytest.approx(2.0 / 63)
+    plain = ExtractionStats()  # a field without a crop: the whole cube, as before
+    extract_mesh(SphereField(0.25), res=64, progress=False, stats=plain)
+    assert plain.voxel == pytest.approx(2.0 / 63)
 
 
 def test_crop_boundary_distance():

@@ -22,9 +22,10 @@ from hybridneus.meshing.convert import (
 from hybridneus.meshing.extract import ExtractionStats, extract_mesh, extract_sdf_mesh
 from hybridneus.meshing.postprocess import PostprocessOptions, postprocess_mesh
 from hybridneus.meshing.unseen import FilledField, UnseenSpace, unseen_space
-from hybridneus.meshing.volume import CropVolume, VoxelGrid
+from hybridneus.meshing.volume import DEFAULT_BOUNDS, CropVolume, VoxelGrid
 
 __all__ = [
+    "DEFAULT_BOUNDS",
     "MESH_FORMATS",
     "CropVolume",
     "ExtractionStats",

@@ -22,9 +22,7 @@ from hybridneus.model.protocol import Field
 def _examined_box(field_: Field, bounds: Bounds | None, crop: CropVolume | None) -> Bounds:
     """Where to look for unseen space: the crop's padded box (the given one, else the
     field's own), else ``bounds``, else the default volume."""
-    values = getattr(field_, "crop", None)
-    if crop is None and values is not None:
-        crop = CropVolume(*(float(v) for v in values))
+    crop = crop if crop is not None else CropVolume.of_field(field_)
     if crop is not None:
         return crop.padded_bounds()
     return bounds if bounds is not None else DEFAULT_BOUNDS
@@ -60,8 +58,13 @@ def extract_mesh(
         field_: any :class:`~hybridneus.model.protocol.Field` (e.g. a trained run, or
             :class:`~hybridneus.model.analytic.SphereField`).
         res: grid points along the longest side of the volume.
-        bounds: world box ((x0, y0, z0), (x1, y1, z1)); default [-1, 1]^3 or the crop's box.
+        bounds: world box ((x0, y0, z0), (x1, y1, z1)); default the crop's box, else
+            [-1, 1]^3. Give ``DEFAULT_BOUNDS`` to mesh the whole volume of a cropped field.
         crop: crop cylinder; its (padded) box is meshed when ``bounds`` is not given.
+            Default (with no ``bounds`` either): the field's own crop (a trained field's,
+            :meth:`CropVolume.of_field`), so that ``res`` points span the object's region as
+            in ``hybridneus mesh`` rather than the whole cube, whose voxels are two to three
+            times larger and lose parts a few pixels thin.
         clip: clip the mesh to ``crop`` (when ``postprocess.clip`` is None).
         color: attach uint8 vertex colours.
         chunk: points per field query.
@@ -95,6 +98,8 @@ def extract_mesh(
 
     if color_normals not in ("mesh", "gradient"):
         raise ValueError(f"color_normals {color_normals!r}: expected 'mesh' or 'gradient'")
+    if bounds is None and crop is None:
+        crop = CropVolume.of_field(field_)
     options = postprocess if postprocess is not None else PostprocessOptions()
     if clip and crop is not None and options.clip is None and options.enabled:
         options = dataclasses.replace(options, clip=crop)

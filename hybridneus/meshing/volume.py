@@ -42,6 +42,15 @@ class CropVolume:
         hi = np.minimum(hi + margin, limit)
         return tuple(lo.tolist()), tuple(hi.tolist())  # type: ignore[return-value]
 
+    @classmethod
+    def of_field(cls, field_: object) -> CropVolume | None:
+        """The crop a field carries (a trained field's ``crop`` buffer, (r, y_min, y_max)),
+        or ``None`` for a field without one (the analytic shapes)."""
+        values = getattr(field_, "crop", None)
+        if values is None:
+            return None
+        return cls(*(float(v) for v in values))
+
     def boundary_distance(self, points: np.ndarray) -> np.ndarray:
         """Unsigned distance (n,) from each of ``points`` (n, 3) to the cylinder's surface.
 
