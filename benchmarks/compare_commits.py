@@ -5,8 +5,9 @@ by default), one after the other, alternating which goes first, so that the mach
 falls on both alike; started again, it skips the fits already in ``--out``. Each commit runs
 from a worktree of its own (its benchmarks/run_suite.py and its package, from a tree of links
 laid out as pyproject.toml maps it, so nothing is installed and later commits to this checkout
-change nothing mid-run) and only fits; this checkout's suite scores every fit, so a pair
-differs by the fitted code alone. Their lines are added to benchmarks/results/suite.jsonl.
+change nothing mid-run) and only fits; the suite of the commit checked out at the start
+scores every fit (from a worktree too, ``scored_at`` in the lines), so a pair differs by the
+fitted code alone. Their lines are added to benchmarks/results/suite.jsonl.
 ``python benchmarks/report.py --compare BASE NEW`` then pairs them. With ``--iters`` (a
 schedule that repeats exactly on a CPU) ``--jobs 2`` runs two fits at a time, each on its
 ``--threads``: the scores are those of fits run alone, their wall times are not.
@@ -54,9 +55,10 @@ def worktree(commit: str) -> tuple[Path, Path]:
 
 
 def run_at(args, commit: str, name: str, seed: int) -> None:
-    """One fit at ``commit`` with that commit's own suite (``--fit-only``), scored by this
-    checkout's suite: both commits of a pair are measured with the same ruler, whatever
-    each commit's scoring was (meshes over the crop's box since ``"volume": "crop"``)."""
+    """One fit at ``commit`` with that commit's own suite (``--fit-only``), scored by the
+    suite of the commit checked out when the comparison started (``args.ruler``, a worktree
+    of its own, so that edits made meanwhile change no score): both commits of a pair are
+    measured with the same ruler, whatever each commit's scoring was."""
     with _SHARED:
         tree, site = worktree(commit)
     suite = tree / "benchmarks" / "run_suite.py"
@@ -80,13 +82,16 @@ def run_at(args, commit: str, name: str, seed: int) -> None:
         return
     scored = WORK / f"{commit}-{name}-s{seed}-lines.jsonl"
     before = len(common.read_lines(scored))
-    score = [sys.executable, str(Path(__file__).with_name("run_suite.py")), "--score-runs",
+    ruler, ruler_site = args.ruler
+    score = [sys.executable, str(ruler / "benchmarks" / "run_suite.py"), "--score-runs",
              str(fitted[-1]), "--cache", str(args.cache), "--threads", str(args.threads),
-             "--out", str(scored), *(["--allow-dirty"] if args.allow_dirty else [])]
-    subprocess.run(score, check=False, stdout=subprocess.DEVNULL)
+             "--assets", str(args.assets), "--out", str(scored)]
+    ruler_env = {**os.environ,
+                 "PYTHONPATH": os.pathsep.join([str(ruler_site), str(ruler / "benchmarks")])}
+    subprocess.run(score, env=ruler_env, cwd=ruler, check=False, stdout=subprocess.DEVNULL)
     for line in common.read_lines(scored)[before:]:
         converted = {**line, "seed": seed, "preset": "fast", "overrides": [],
-                     "iters": args.iters,
+                     "iters": args.iters, "scored_at": args.ruler_commit,
                      "command": f"python benchmarks/compare_commits.py {args.base} {args.new} "
                      f"(fits with the commit's run_suite.py {' '.join(cmd[2:])})"}
         with _SHARED:
@@ -131,6 +136,9 @@ def main() -> None:
     if args.jobs < 1 or (args.jobs > 1 and not args.iters):
         ap.error("--jobs must be 1, or more with --iters")
     args.base, args.new = (common.short_commit(c) for c in (args.base, args.new))
+    common.check_tree(args)  # the ruler is this checkout's commit: its code must be that
+    args.ruler_commit = common.git_state()[0]
+    args.ruler = worktree(args.ruler_commit)
     assets = run_suite.find_assets(args.assets)
     sources = list(assets) if args.scenes is None else [s for s in args.scenes if s != "none"]
     if args.generated:
