@@ -51,8 +51,13 @@ def pick_lines(lines: list[dict], scene: str, presets: list[str], commit: str | 
 
 
 def budget_text(line: dict) -> str:
-    """A suite line's budget as captions write it: ``15 min`` or ``2000 steps``."""
-    return f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
+    """A suite line's budget as captions write it: ``15 min`` or ``2000 steps``, and where
+    the mesh spans the crop's box (``"volume": "crop"``), ``2000 steps, res 300 over the
+    crop``."""
+    budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
+    if line.get("volume") == "crop":
+        budget += f", res {line.get('res', 300)} over the crop"
+    return budget
 
 
 def caption(line: dict, ungrouped: bool = False) -> str:
@@ -76,7 +81,7 @@ def ungrouped_mesh(line: dict) -> Path:
 
     from hybridneus.config import load_config
     from hybridneus.data.dataset import read_camera_centres
-    from hybridneus.meshing import PostprocessOptions, extract_mesh
+    from hybridneus.meshing import DEFAULT_BOUNDS, PostprocessOptions, extract_mesh
     from hybridneus.meshing.convert import save_mesh
 
     snaps = suite_jobs.snapshots(run)
@@ -85,8 +90,10 @@ def ungrouped_mesh(line: dict) -> Path:
     cfg = load_config(run / "config.yaml")
     field, _ = suite_jobs.load_snapshot(cfg, snaps[-1])
     cameras = read_camera_centres(Path(line["dataset"]) / cfg.data.split)
+    # over the volume the line was scored on: lines without "volume" meshed the whole cube
+    volume = {} if line.get("volume") == "crop" else {"bounds": DEFAULT_BOUNDS}
     mesh = extract_mesh(field, res=int(line["res"]), progress=False, cameras=cameras,
-                        postprocess=PostprocessOptions(component_gap=0.0))
+                        postprocess=PostprocessOptions(component_gap=0.0), **volume)
     save_mesh(mesh, path)
     return path
 
