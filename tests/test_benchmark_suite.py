@@ -114,6 +114,26 @@ def test_floor_meshes_leave_out_exactly_the_unseen_part():
     assert len(cage["body"].faces) == len(cage_parts[0].faces)
 
 
+def test_a_meshed_floor_loses_a_wire_thinner_than_the_whole_cube_voxel_only():
+    """bench_floor --meshed: a wire 1.3 voxels of the whole cube wide (res 48) is lost there
+    and kept over the truth's box, 4.5 times finer; a thick box is kept by both."""
+    _suite_module()
+    import bench_floor
+    import trimesh
+
+    voxel = 2.0 / 47
+    wire = trimesh.creation.cylinder(radius=0.65 * voxel, height=0.4, sections=16)
+    wire.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+    block = trimesh.creation.box(extents=(0.3, 0.1, 0.3))
+    block.apply_translation((0.0, -0.25, 0.0))
+    gt = trimesh.util.concatenate([wire, block])
+    meshes = bench_floor.meshed_floors(bench_floor.TruthField([wire, block]), gt, 48)
+    cube, box = (meshes[f"meshed at res 48, {v}"] for v in ("whole cube", "the truth's box"))
+    assert box.bounds[1, 1] > 0.19 and cube.bounds[1, 1] < 0.0  # the wire's top, y = 0.2
+    assert abs(cube.area - block.area) < 0.2 * block.area
+    assert box.area > cube.area + 0.5 * wire.area
+
+
 def test_preset_specs_name_a_preset_and_its_overrides():
     _suite_module()
     import suite_jobs
