@@ -175,17 +175,19 @@ def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
         if not xs:
             continue
         mx, my = statistics.mean(xs), statistics.mean(ys)
-        for group in _groups(scene):
-            totals[group].append((mx, my))
+        for group in _groups(scene):  # a budget's means of its own: rulers differ
+            totals[(group, budget)].append((mx, my))
         # worse by more than either commit's seed spread (a single seed has none to go by)
         spread = max(max(xs) - min(xs), max(ys) - min(ys))
         beyond = "-" if len(xs) < 2 else ("yes" if my - mx > spread else "no")
         out.append(f"| {scene} | {preset} | {budget} | {len(xs)} | {mx:.4f} | {_spread(xs)} | "
                    f"{my:.4f} | {_spread(ys)} | {100 * (my / mx - 1):+.1f}% | {beyond} |")
-    for name, values in totals.items():
+    budgets = {budget for _, budget in totals}
+    for (name, budget), values in sorted(totals.items(), key=lambda kv: kv[0][1]):
         mx = statistics.mean(x for x, _ in values)
         my = statistics.mean(y for _, y in values)
-        out.append(f"| **mean, {name}** | | | | **{mx:.4f}** | | **{my:.4f}** | | "
+        label = f"{name}, {budget}" if len(budgets) > 1 else name
+        out.append(f"| **mean, {label}** | | | | **{mx:.4f}** | | **{my:.4f}** | | "
                    f"{100 * (my / mx - 1):+.1f}% | |")
     return [*out, ""]
 

@@ -331,6 +331,13 @@ def test_the_kinds_with_few_events_get_their_own_mean():
     assert "| **mean, generated, box/slab/cage/rods** | | | | **0.0200** | | **0.0100** |" in text
     accuracy = "\n".join(report.suite_section(lines))
     assert "| **mean, generated, box/slab/cage/rods** | | **0.0100** |" in accuracy
+    # the same fits scored over the crop: a budget, and means, of their own
+    lines += [{**r, "volume": "crop", "chamfer": r["chamfer"] / 2} for r in lines]
+    text = "\n".join(report.compare_section(lines, "aaa", "bbb"))
+    assert "| gen-box-1 | fast | 15 min, meshed over the crop | 1 | 0.0100 |" in text
+    assert "| **mean, generated, 15 min** | | | | **0.0150** | | **0.0100** |" in text
+    assert ("| **mean, generated, 15 min, meshed over the crop** | | | | **0.0075** | | "
+            "**0.0050** |") in text
 
 
 def test_speed_tables_give_each_field_a_column():
