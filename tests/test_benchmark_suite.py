@@ -352,6 +352,24 @@ def test_speed_tables_give_each_field_a_column():
     assert first == "| fwd | 1.5 | 2 | yes |" and second == "| eikonal | 0.25 | - | - |"
 
 
+def test_floors_of_several_runs_are_shown_together_the_newest_per_mesh():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    base = {"bench": "floor", "machine": {"cpu": "X"}, "threads": None, "kind": "cage",
+            "seed": 1, "date": "2026-12-02T03:00:00+00:00"}
+    rows = [{**base, "commit": "aaa", "command": "one", "dataset": "cage", "mesh": "cube",
+             "chamfer": 0.03},
+            {**base, "commit": "bbb", "command": "two", "dataset": "cage", "mesh": "cube",
+             "chamfer": 0.025},
+            {**base, "commit": "bbb", "command": "three", "dataset": "bunny", "mesh": "cube",
+             "chamfer": 0.008}]
+    text = "\n".join(report.speed_section({"floor": rows}))
+    assert "commit bbb," in text and "| cage | 1 | cage | cube | 0.025 |" in text
+    assert "0.03 |" not in text and "| cage | 1 | bunny | cube | 0.008 |" in text
+    assert "Command: `two`" in text and "Command: `three`" in text
+
+
 def test_readme_results_are_generated_from_one_commits_lines():
     sys.path.insert(0, str(SUITE.parent))
     import common
