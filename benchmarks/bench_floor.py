@@ -60,6 +60,15 @@ def ideal_meshes(kind: str, seed: int) -> dict:
     return out
 
 
+def in_world(meshes: list, tf: dict) -> list:
+    """``meshes``, moved in place from the generator's units into the dataset's world by its
+    ``scene.json`` transform (``world = source * scale + translation``)."""
+    for mesh in meshes:
+        mesh.apply_scale(tf["scale"])
+        mesh.apply_translation(tf["translation"])
+    return meshes
+
+
 class TruthField:
     """The ground truth's signed distance as a field (``sdf`` only, what meshing reads).
 
@@ -127,22 +136,15 @@ def main() -> None:
         kind, seed = (parse_source(source) if source.startswith("generated:")
                       else (None, None))
         if args.meshed:
-            if kind is None:
-                parts = [gt]
-            else:
-                parts = [p.to_trimesh() for p in generated_parts(kind, seed)]
-                for part in parts:
-                    part.apply_scale(tf["scale"])
-                    part.apply_translation(tf["translation"])
+            parts = ([gt] if kind is None else
+                     in_world([p.to_trimesh() for p in generated_parts(kind, seed)], tf))
             meshes = meshed_floors(TruthField(parts), gt, args.meshed)
         elif kind is None:
             raise SystemExit(f"error: {folder}: ideal meshes need a generated object; "
                              "--meshed RES scores any dataset")
         else:
             meshes = ideal_meshes(kind, seed)
-            for mesh in meshes.values():
-                mesh.apply_scale(tf["scale"])
-                mesh.apply_translation(tf["translation"])
+            in_world(list(meshes.values()), tf)
         for name, mesh in meshes.items():
             cd = chamfer_distance(mesh, gt)
             print(f"{folder.name} {name}: Chamfer {cd.chamfer:.4f} (accuracy {cd.accuracy:.4f}, "

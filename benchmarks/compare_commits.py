@@ -33,7 +33,7 @@ import common
 import run_suite
 
 WORK = Path("/tmp/hybridneus-compare")
-#: Held while a worktree is made or a line is added, which fits running side by side share.
+#: Held while a line is added to ``--out``, which fits running side by side share.
 _SHARED = threading.Lock()
 
 
@@ -54,27 +54,39 @@ def worktree(commit: str) -> tuple[Path, Path]:
     return tree, site
 
 
+def suite_env(tree: Path, site: Path) -> dict[str, str]:
+    """The environment that runs a worktree's suite: its site first, so that the worktree's
+    package is imported, not the one installed from this checkout."""
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(tree / "benchmarks")])}
+
+
+def fitting_worktree(commit: str) -> tuple[Path, Path]:
+    """:func:`worktree` of a commit whose suite can fit without scoring (``--fit-only``);
+    a one-line exit otherwise, before any fit."""
+    tree, site = worktree(commit)
+    if "--fit-only" not in (tree / "benchmarks" / "run_suite.py").read_text():
+        raise SystemExit(f"error: {commit}: its run_suite.py cannot fit without scoring "
+                         "(--fit-only); compare later commits")
+    return tree, site
+
+
 def run_at(args, commit: str, name: str, seed: int) -> None:
     """One fit at ``commit`` with that commit's own suite (``--fit-only``), scored by the
     suite of the commit checked out when the comparison started (``args.ruler``, a worktree
     of its own, so that edits made meanwhile change no score): both commits of a pair are
     measured with the same ruler, whatever each commit's scoring was."""
-    with _SHARED:
-        tree, site = worktree(commit)
+    tree, site = args.trees[commit]
     suite = tree / "benchmarks" / "run_suite.py"
-    if "--fit-only" not in suite.read_text():
-        raise SystemExit(f"error: {commit}: its run_suite.py cannot fit without scoring "
-                         "(--fit-only); compare later commits")
-    # a folder and a file per fit: fits running side by side must not take each other's
+    # a folder and a file per fit: fits running side by side must not take each other's runs
+    # or lines
     runs = args.out_runs / f"{commit}-{name}-s{seed}"
     budget = (["--iters", str(args.iters)] if args.iters else ["--minutes", str(args.minutes)])
     cmd = [sys.executable, str(suite), "--scenes", name, "--presets", "fast", *budget,
            "--seeds", str(seed), "--threads", str(args.threads), "--assets", str(args.assets),
            "--cache", str(args.cache), "--out-runs", str(runs), "--curve", "2",
            "--image-views", "0", "--fit-only"]
-    # the site first: the worktree's package, not the one installed from this checkout
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(tree / "benchmarks")])}
-    subprocess.run(cmd, env=env, cwd=tree, check=False, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, env=suite_env(tree, site), cwd=tree, check=False,
+                   stdout=subprocess.DEVNULL)
     fitted = sorted((f.parent for f in runs.glob("*/fit.json")), key=lambda d: d.stat().st_mtime)
     if not fitted:
         print(f"[compare] {commit} {name} seed {seed}: the fit failed; skipped",
@@ -86,9 +98,8 @@ def run_at(args, commit: str, name: str, seed: int) -> None:
     score = [sys.executable, str(ruler / "benchmarks" / "run_suite.py"), "--score-runs",
              str(fitted[-1]), "--cache", str(args.cache), "--threads", str(args.threads),
              "--assets", str(args.assets), "--out", str(scored)]
-    ruler_env = {**os.environ,
-                 "PYTHONPATH": os.pathsep.join([str(ruler_site), str(ruler / "benchmarks")])}
-    subprocess.run(score, env=ruler_env, cwd=ruler, check=False, stdout=subprocess.DEVNULL)
+    subprocess.run(score, env=suite_env(ruler, ruler_site), cwd=ruler, check=False,
+                   stdout=subprocess.DEVNULL)
     for line in common.read_lines(scored)[before:]:
         converted = {**line, "seed": seed, "preset": "fast", "overrides": [],
                      "iters": args.iters, "scored_at": args.ruler_commit,
@@ -139,6 +150,8 @@ def main() -> None:
     common.check_tree(args)  # the ruler is this checkout's commit: its code must be that
     args.ruler_commit = common.git_state()[0]
     args.ruler = worktree(args.ruler_commit)
+    # made (and checked) here, before the fits run side by side
+    args.trees = {commit: fitting_worktree(commit) for commit in (args.base, args.new)}
     assets = run_suite.find_assets(args.assets)
     sources = list(assets) if args.scenes is None else [s for s in args.scenes if s != "none"]
     if args.generated:
