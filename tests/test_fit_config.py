@@ -55,6 +55,9 @@ def test_overrides_are_typed():
     assert cfg.field.learned_background is True and cfg.grid.kind == "dense"
     cfg = apply_overrides(cfg, ["train.lr=1"])  # an int is accepted for a float
     assert isinstance(cfg.train.lr, float)
+    # YAML reads "1e-8" (no point in the mantissa) as a string; a float key takes it
+    cfg = apply_overrides(cfg, ["train.adam_eps=1e-8", "data.threshold=2e-1"])
+    assert cfg.train.adam_eps == 1e-8 and cfg.data.threshold == 0.2
 
 
 @pytest.mark.parametrize(
@@ -64,6 +67,9 @@ def test_overrides_are_typed():
         ("trian.lr=1", "trian.lr: unknown key 'trian'"),
         ("train.iters=1.5", "train.iters: expected an integer"),
         ("train.iters=many", "train.iters: expected an integer"),
+        ("train.iters=1e3", "train.iters: expected an integer"),
+        ("train.lr=fast", "train.lr: expected a number"),
+        ("train.lr=nan", "train.lr: expected a number"),
         ("field.learned_background=3", "expected true or false"),
         ("train", "expected key=value"),
         ("train=3", "is a section"),
