@@ -106,6 +106,16 @@ def stamp(threads: int | None, device: str = "cpu") -> dict[str, Any]:
 
 #: The suite command a fit was made for, handed to its child process and kept in fit.json
 #: (a line scored later, by another command, names both).
+#: A suite line's ``volume`` when its mesh spans the field's crop box, as ``hybridneus mesh``
+#: makes it (lines without it were meshed over the whole cube, a coarser ruler).
+CROP_VOLUME = "crop"
+
+
+def meshed_over_crop(line: dict[str, Any]) -> bool:
+    """Whether a suite line's mesh spans the crop (:data:`CROP_VOLUME`)."""
+    return line.get("volume") == CROP_VOLUME
+
+
 FIT_COMMAND = "HYBRIDNEUS_FIT_COMMAND"
 
 

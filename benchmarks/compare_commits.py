@@ -117,7 +117,7 @@ def done(args) -> set[tuple[str, str, int]]:
     return {(x["commit"], x["scene"], x["seed"]) for x in common.read_lines(args.out)
             if x.get("bench") == "suite" and (x.get("iters") == args.iters if args.iters
                                               else x.get("minutes") == args.minutes)
-            and x.get("volume") == "crop"  # the older lines were scored with another ruler
+            and common.meshed_over_crop(x)  # the older lines were scored with another ruler
             and "compare_commits.py" in str(x.get("command", ""))}
 
 

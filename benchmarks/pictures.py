@@ -55,7 +55,7 @@ def budget_text(line: dict) -> str:
     the mesh spans the crop's box (``"volume": "crop"``), ``2000 steps, res 300 over the
     crop``."""
     budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
-    if line.get("volume") == "crop":
+    if common.meshed_over_crop(line):
         budget += f", res {line.get('res', 300)} over the crop"
     return budget
 
@@ -91,7 +91,7 @@ def ungrouped_mesh(line: dict) -> Path:
     field, _ = suite_jobs.load_snapshot(cfg, snaps[-1])
     cameras = read_camera_centres(Path(line["dataset"]) / cfg.data.split)
     # over the volume the line was scored on: lines without "volume" meshed the whole cube
-    volume = {} if line.get("volume") == "crop" else {"bounds": DEFAULT_BOUNDS}
+    volume = {} if common.meshed_over_crop(line) else {"bounds": DEFAULT_BOUNDS}
     mesh = extract_mesh(field, res=int(line["res"]), progress=False, cameras=cameras,
                         postprocess=PostprocessOptions(component_gap=0.0), **volume)
     save_mesh(mesh, path)

@@ -39,7 +39,7 @@ def _budget(line: dict) -> str:
     whole cube (older ones) and over the crop score the same fit differently, so no table
     pairs or averages the two."""
     budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line.get('iters')} steps"
-    return f"{budget}, meshed over the crop" if line.get("volume") == "crop" else budget
+    return f"{budget}, meshed over the crop" if common.meshed_over_crop(line) else budget
 
 
 def _f(v, digits: int = 4) -> str:

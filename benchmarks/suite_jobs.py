@@ -209,7 +209,8 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     ungrouped, ungrouped_mesh = _score(field, gt, res, cameras, component_gap=0.0)
     # "volume": res points span the field's crop box, as in `hybridneus mesh`; lines
     # without it were meshed over the whole cube [-1, 1]^3, with voxels 2-3x larger
-    report = {**info, "run": str(run_dir), "res": res, "volume": "crop", **final, "curve": curve,
+    report = {**info, "run": str(run_dir), "res": res, "volume": common.CROP_VOLUME, **final,
+              "curve": curve,
               "chamfer_unfilled": unfilled["chamfer"], "chamfer_cavities": cavities["chamfer"],
               "chamfer_ungrouped": ungrouped["chamfer"]}
     if mesh is not None and len(mesh.faces):
