@@ -370,3 +370,39 @@ def test_a_shaded_fit_learns_its_shading_and_saves_it(scene, tmp_path):
     pts = np.random.default_rng(0).uniform(-0.3, 0.3, (50, 3)).astype(np.float32)
     dirs = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (50, 1))
     assert np.allclose(loaded.color(pts, dirs), field.color(pts, dirs), atol=1e-6)
+
+
+def test_the_sdf_head_learns_at_its_own_rate_on_the_same_schedule(scene):
+    default = prepare(scene, tiny("train.iters=4"), device="cpu")[0]
+    assert [g["name"] for g in default.optimizer.param_groups] == ["field", "variance"]
+    trainer = prepare(scene, tiny("train.iters=4", "train.lr_sdf_head=0.1"), device="cpu")[0]
+    groups = {g["name"]: g for g in trainer.optimizer.param_groups}
+    head = {id(q) for q in trainer.field.sdf_net.parameters()}
+    assert {id(q) for q in groups["sdf_head"]["params"]} == head
+    assert not head & {id(q) for q in groups["field"]["params"]}
+    seen = []
+    trainer.fit([lambda t, lg: seen.append((groups["field"]["lr"],
+                                            groups["sdf_head"]["lr"]))], progress=False)
+    assert len(seen) == 4 and len({f for f, _ in seen}) > 1  # the warm-up moves both
+    for field_lr, head_lr in seen:
+        assert head_lr == pytest.approx(0.1 * field_lr)
+    # a slower head moves the SDF less in the same steps
+    before = params(prepare(scene, tiny("train.iters=4"), device="cpu")[0].field)
+    moved = {}
+    for rate in ("1.0", "0.1"):
+        field = fit(scene, tiny("train.iters=4", f"train.lr_sdf_head={rate}"), device="cpu")
+        after = params(field)
+        moved[rate] = sum(float((after[k] - before[k]).abs().sum()) for k in after
+                          if k.startswith("sdf_net."))
+    assert 0 < moved["0.1"] < 0.5 * moved["1.0"]
+
+
+def test_resume_with_an_sdf_head_rate_continues_with_identical_state(scene, tmp_path):
+    cfg = tiny("train.iters=6", "train.checkpoint_every=3", "train.seed=5",
+               "train.lr_sdf_head=0.2")
+    straight = fit(scene, cfg, out=tmp_path / "a", device="cpu")
+    first = fit(scene, cfg, [stop_at(3)], out=tmp_path / "b", device="cpu")
+    resumed = fit(None, None, resume=first.run_dir, device="cpu")
+    a, b = params(straight), params(resumed)
+    for k in a:
+        assert torch.equal(a[k], b[k]), k

@@ -109,6 +109,10 @@ class TrainConfig:
     n_rays: int = 0  # pixels per step, each at both window ends (0: 256 on CPU, 1024 on CUDA)
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)
+    # Adam moves every weight of the SDF head's output row by about the learning rate per
+    # step, and its hidden units are all positive, so the head can shift the whole SDF by
+    # tenths within a few steps (docs/accuracy.md, "Why a field empties").
+    lr_sdf_head: float = 1.0  # the SDF head's learning rate, as a multiple of train.lr
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
     # A tenth: warmed up over 0.005, fields emptied or ran away in sharpness while only the

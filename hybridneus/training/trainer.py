@@ -38,11 +38,17 @@ log = logging.getLogger("hybridneus")
 
 
 def make_optimizer(field: HybridField, cfg: Config) -> torch.optim.Adam:
-    """Adam over the field, the NeuS variance in a group of its own learning rate."""
-    variance = [field.variance]
-    others = [q for name, q in field.named_parameters() if name != "variance"]
-    groups = [{"params": others, "lr": cfg.train.lr, "name": "field"},
-              {"params": variance, "lr": cfg.train.lr_variance, "name": "variance"}]
+    """Adam over the field, the NeuS variance in a group of its own learning rate, and the
+    SDF head in one of its own when ``train.lr_sdf_head`` is not 1."""
+    t = cfg.train
+    own_head = t.lr_sdf_head != 1.0
+    head = [q for name, q in field.named_parameters() if name.startswith("sdf_net.")]
+    others = [q for name, q in field.named_parameters()
+              if name != "variance" and not (own_head and name.startswith("sdf_net."))]
+    groups = [{"params": others, "lr": t.lr, "name": "field"},
+              {"params": [field.variance], "lr": t.lr_variance, "name": "variance"}]
+    if own_head:
+        groups.append({"params": head, "lr": t.lr * t.lr_sdf_head, "name": "sdf_head"})
     kwargs = dict(betas=tuple(cfg.train.betas), eps=cfg.train.adam_eps)
     try:
         return torch.optim.Adam(groups, fused=True, **kwargs)
@@ -118,7 +124,8 @@ class Trainer:
                                           seed=cfg.train.seed, device=self.device)
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.train.seed + 1)
         self.optimizer = make_optimizer(self.field, cfg)
-        self.base_lrs = [cfg.train.lr, cfg.train.lr_variance]
+        # the rates the schedule scales (a loaded optimizer state brings its last ones)
+        self.base_lrs = [g["lr"] for g in self.optimizer.param_groups]
         self.params = [q for g in self.optimizer.param_groups for q in g["params"]]
         self.poses = self.pose_optimizer = None  # refine.poses: learned pose corrections
         if cfg.refine.poses:
