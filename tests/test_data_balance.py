@@ -181,3 +181,45 @@ def test_a_stated_offset_is_kept_with_a_warning_when_the_events_disagree(lopside
     assert found.dataset.preset.polarity_offset == 0.0
     assert any("but the events imply -0." in r.getMessage() for r in caplog.records)
     assert any("--set data.polarity_offset=" in w for w in found.warnings)
+
+
+def _orbit(n_views: int, turns: float) -> np.ndarray:
+    angles = np.linspace(0.0, 2 * np.pi * turns, n_views, endpoint=False)
+    c2w = np.tile(np.eye(4), (n_views, 1, 1))
+    c2w[:, 0, 3], c2w[:, 2, 3] = np.cos(angles), np.sin(angles)
+    return c2w
+
+
+def test_a_path_is_closed_when_its_cameras_come_back_to_their_start():
+    from hybridneus.data.balance import closed_path
+
+    assert closed_path(_orbit(100, 1.0))[0]  # ends one step short of its start
+    assert closed_path(_orbit(100, 3.0))[0]
+    still = closed_path(np.tile(np.eye(4), (5, 1, 1)))
+    assert still == (True, 0.0)
+    closed, gap = closed_path(_orbit(100, 0.5))  # half a turn: the far side of the circle
+    chord = np.sin(99 * np.pi / 200) / np.sin(np.pi / 200)  # chords of 99 and of 1 step
+    assert not closed and gap == pytest.approx(chord, rel=1e-6)
+    spiral = _orbit(100, 1.0)
+    spiral[:, 1, 3] = np.linspace(1.0, 0.0, 100)  # a turn that also comes down
+    assert not closed_path(spiral)[0]
+
+
+def test_over_an_open_path_the_balance_sets_no_offset_and_warns_of_none(lopsided, tmp_path):
+    from hybridneus.data import load_dataset
+
+    custom, _ = lopsided
+    opened = tmp_path / "device"
+    shutil.copytree(custom, opened)
+    poses = sorted((opened / "train" / "pose").iterdir())
+    for path in poses[len(poses) // 2:]:  # the second half of the orbit, lifted by 1
+        m = np.loadtxt(path).reshape(4, 4)
+        m[1, 3] += 1.0
+        np.savetxt(path, m)
+    assert load_dataset(opened).preset.polarity_offset == 0.0
+    found = _estimated(_config(), opened)
+    assert found.dataset.preset.polarity_offset == 0.0 and "polarity_offset" not in found.taken
+    assert any("an open path" in line for line in found.lines)
+    published = tmp_path / "nerf" / "lego"  # a stated 0: no warning either
+    shutil.copytree(opened, published)
+    assert not _estimated(_config(), published).warnings

@@ -11,7 +11,10 @@ drift of ``C o`` per event to every target.
 The data say what ``o`` is. Over a capture that comes back to where it started (a turntable,
 a closed orbit) each pixel sees the same brightness at the end as at the start, so its events
 sum to no change: ``n+ (1 + o) = n- (1 - o)``, that is ``o = (n- - n+) / (n+ + n-)``. Along an
-open path the per-pixel sums are not zero, but they do not lean to one sign. The estimate is
+open path they need not: a spiral from the pole to the equator that sees a shaded surface
+turn away from its light fires mostly OFF events at every pixel of it (a simulated bowl with
+balanced polarities reads as -0.9), so a fit uses the estimate only where
+:func:`closed_path` says the cameras come back to their start. The estimate is
 the median of that ratio over the pixels with at least ``MIN_EVENTS`` events, taken after the
 background-activity filter (:mod:`hybridneus.data.denoise`): balanced noise events would pull
 each pixel's ratio towards 0, and a hot pixel (one polarity, many events) is one pixel of
@@ -21,6 +24,7 @@ happen to be smallest, which fire the most.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -40,6 +44,9 @@ BALANCED = 0.05
 #: A stated offset this far from the estimate gets a warning (the published real scenes'
 #: offsets span 0.1).
 DISAGREE = 0.15
+#: A path is closed when its last camera centre is within this many of its typical steps
+#: between views from the first (a loop of N views ends one step from its start).
+CLOSED_STEPS = 3.0
 
 
 @dataclass(frozen=True)
@@ -88,6 +95,26 @@ class PolarityBalance:
         if self.balanced:
             return f"polarity: the events are balanced (offset {self.offset:+.3f}; {where})"
         return f"polarity: the events imply an offset of {self.offset:+.3f} ({where})"
+
+
+def closed_path(c2w: np.ndarray) -> tuple[bool, float]:
+    """Whether a capture's cameras come back to where they started.
+
+    Args:
+        c2w: (n_views, 4, 4) camera-to-world poses in capture order.
+
+    Returns:
+        ``(closed, gap)``: closed when the gap between the first and the last camera centre
+        is at most :data:`CLOSED_STEPS` median steps between consecutive views; ``gap`` in
+        such steps (0 where the cameras never move).
+    """
+    centres = np.asarray(c2w, np.float64)[:, :3, 3]
+    gap = float(np.linalg.norm(centres[-1] - centres[0]))
+    steps = np.linalg.norm(np.diff(centres, axis=0), axis=1)
+    step = float(np.median(steps)) if steps.size else 0.0
+    if step <= 0.0:
+        return gap <= 0.0, 0.0 if gap <= 0.0 else math.inf
+    return gap <= CLOSED_STEPS * step, gap / step
 
 
 def balance_offset(events: EventStream, width: int, height: int) -> PolarityBalance:

@@ -13,7 +13,8 @@ line each on how, go into the run's ``scene.yaml``; ``hybridneus info`` prints t
   ON/OFF ratio). Without usable frames the preset's C stays, and a line says so.
 - **Polarity offset** (:mod:`hybridneus.data.balance`): the median per-pixel polarity balance
   after the noise filter, when neither the path, ``scene.json`` nor the config states an
-  offset. A stated one that the events contradict gets a warning.
+  offset and the cameras come back to their start. A stated one that the events contradict
+  gets a warning.
 - **Crop** (:func:`hybridneus.data.hull.event_hull_crop`): the crop cylinder shrunk to the
   visual hull of the event silhouettes, when the config sets no ``data.crop_*``.
 - **Tonemap eps** (:mod:`hybridneus.data.contrast`): the preset's eps capped at
@@ -152,12 +153,22 @@ def _threshold(found: Estimates, split, take_offset: bool) -> None:
 
 
 def _polarity_offset(found: Estimates, split) -> None:
+    from hybridneus.data.balance import closed_path
+
     noise, balance = noise_and_balance(split)
     found.noise, found.balance = noise, balance
     found.lines += [noise, balance.line()]
     suggested = balance.suggested()
     p = found.dataset.preset
     if suggested is None:
+        return
+    closed, gap = closed_path(split.c2w)
+    if not closed:
+        found.lines.append(
+            f"polarity: the cameras end {gap:.0f} steps between views from where they started "
+            "(an open path), over which a pixel's events need not balance: the offset stays "
+            f"{p.polarity_offset:g} ({found.dataset.preset_source}; --set "
+            "data.polarity_offset=O states it)")
         return
     if "polarity_offset" in found.dataset.stated:
         if balance.disagrees(p.polarity_offset):
