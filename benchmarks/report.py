@@ -492,6 +492,7 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
     for bench, title in (("repeat", "Repeatability"), ("step", "One training step"),
                          ("trained_step", "A trained field's step"),
                          ("early", "The first steps of a fit"),
+                         ("collapse", "Which part of the field moved when it emptied"),
                          ("carving", "What a fit's opening holds of the solid"),
                          ("floor", "Chamfer floors: ideal meshes that lack an unseen part, and the "
                           "ground truth meshed"),
@@ -505,14 +506,17 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             by_machine[_cpu(r)].append(r)
         for cpu, rows in by_machine.items():
             # the latest run on each machine: the lines of its command and commit (of the
-            # first steps and the carving, whose runs each take one dataset, every command
-            # of that commit)
+            # carving, the collapse and convert, whose runs each take one dataset, every
+            # command of that commit)
             last = rows[-1]
             if bench == "floor":  # a floor per dataset and mesh, the newest, whichever run
                 rows = list({(r["dataset"], r["mesh"]): r for r in rows}.values())
+            elif bench == "early":  # the newest of each opening and variant, whichever run
+                rows = list({(r["dataset"], r["variant"], r["steps"], r["iters"]): r
+                             for r in rows}.values())
             else:
                 rows = [r for r in rows if r["commit"] == last["commit"]
-                        and (bench in ("early", "carving", "convert")
+                        and (bench in ("carving", "convert", "collapse")
                              or r["command"] == last["command"])]
             commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
             commits = ", ".join(dict.fromkeys(r["commit"] for r in rows))

@@ -561,6 +561,35 @@ def test_the_opening_of_a_fit_is_recorded_per_seed(tiny_scene, tmp_path):
         assert all(0.0 <= o <= 1.0 for o in line["occupied"])
 
 
+def test_the_collapse_blames_the_part_whose_parameters_moved(tiny_scene, tmp_path):
+    sys.path.insert(0, str(SUITE.parent))
+    import bench_collapse
+    import torch
+
+    from hybridneus.api import prepare
+
+    field = prepare(tiny_scene / "device", "fast", ["train.iters=2"], device="cpu")[0].field
+    a = {k: v.clone() for k, v in field.state_dict().items()}
+    b = {k: v.clone() for k, v in a.items()}
+    last = max(k for k in b if k.startswith("sdf_net.") and k.endswith(".bias"))
+    b[last][0] += 0.5  # the head's output bias lifts the whole SDF by 0.5
+    points = bench_collapse.crop_points(tuple(float(v) for v in field.crop), 4000)
+    base = bench_collapse.mixed(field, a, a, points)
+    head = bench_collapse.mixed(field, a, b, points)
+    grid = bench_collapse.mixed(field, b, a, points)
+    assert torch.allclose(head - base, torch.full_like(base, 0.5), atol=1e-5)
+    assert torch.equal(grid, base)
+    out = tmp_path / "collapse.jsonl"
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_collapse.py")),
+                           str(tiny_scene / "device"), "--seed", "0", "--iters", "40",
+                           "--at", "2", "4", "--allow-dirty", "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (line,) = [json.loads(x) for x in out.read_text().splitlines()]
+    assert line["at"] == [2, 4] and 0.0 <= line["inside_at_a"] <= 1.0
+    assert {"shift_head_from_b", "shift_grid_from_b", "inside_both_from_b"} <= line.keys()
+
+
 def test_the_carving_of_a_fit_is_recorded_with_its_slices(tiny_scene, tmp_path):
     out, image = tmp_path / "carving.jsonl", tmp_path / "carving.png"
     proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_carving.py")),
