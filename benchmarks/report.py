@@ -506,17 +506,20 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             by_machine[_cpu(r)].append(r)
         for cpu, rows in by_machine.items():
             # the latest run on each machine: the lines of its command and commit (of the
-            # carving, the collapse and convert, whose runs each take one dataset, every
-            # command of that commit)
+            # carving and convert, whose runs each take one dataset, every command of that
+            # commit)
             last = rows[-1]
             if bench == "floor":  # a floor per dataset and mesh, the newest, whichever run
                 rows = list({(r["dataset"], r["mesh"]): r for r in rows}.values())
             elif bench == "early":  # the newest of each opening and variant, whichever run
                 rows = list({(r["dataset"], r["variant"], r["steps"], r["iters"]): r
                              for r in rows}.values())
+            elif bench == "collapse":  # the newest of each fit and pair of steps
+                rows = list({(r["dataset"], r["seed"], r["iters"], tuple(r["at"]),
+                              tuple(r["overrides"])): r for r in rows}.values())
             else:
                 rows = [r for r in rows if r["commit"] == last["commit"]
-                        and (bench in ("carving", "convert", "collapse")
+                        and (bench in ("carving", "convert")
                              or r["command"] == last["command"])]
             commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
             commits = ", ".join(dict.fromkeys(r["commit"] for r in rows))
