@@ -92,8 +92,7 @@ def main() -> None:
     common.add_arguments(ap, "collapse")
     args = ap.parse_args()
     common.check_tree(args)
-    if not (args.dataset / "scene.json").is_file():
-        raise SystemExit(f"error: {args.dataset}: no scene.json (not a dataset folder)")
+    common.require_dataset(args.dataset)
     if not 0 < args.at[0] < args.at[1]:
         raise SystemExit(f"error: --at {args.at[0]} {args.at[1]}: need 0 < A < B")
     found = attribute(args.dataset, args.seed, args.iters, tuple(args.at), args.threads,

@@ -83,8 +83,7 @@ def main() -> None:
     common.add_arguments(ap, "early")
     args = ap.parse_args()
     common.check_tree(args)
-    if not (args.dataset / "scene.json").is_file():
-        raise SystemExit(f"error: {args.dataset}: no scene.json (not a dataset folder)")
+    common.require_dataset(args.dataset)
     for variant in args.variants:
         overrides = [o for o in variant.split("+") if o]
         runs = [opening(args.dataset, s, args.steps, args.iters, overrides, args.threads)

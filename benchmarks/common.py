@@ -76,6 +76,12 @@ def check_tree(args: argparse.Namespace) -> None:
                          "give --allow-dirty (the lines then stay out of the docs)")
 
 
+def require_dataset(path: Path) -> None:
+    """Exit with one line unless ``path`` is a dataset folder (it holds ``scene.json``)."""
+    if not (path / "scene.json").is_file():
+        raise SystemExit(f"error: {path}: no scene.json (not a dataset folder)")
+
+
 def machine(device: str = "cpu") -> dict[str, Any]:
     """Where a measurement ran: CPU model and cores, the GPU's name, torch's version."""
     import torch
