@@ -164,6 +164,8 @@ def _polarity_offset(found: Estimates, split) -> None:
         return
     closed, gap = closed_path(split.c2w)
     if not closed:
+        if suggested == p.polarity_offset:  # agrees anyway: nothing to explain
+            return
         found.lines.append(
             f"polarity: the cameras end {gap:.0f} steps between views from where they started "
             "(an open path), over which a pixel's events need not balance: the offset stays "
