@@ -110,8 +110,6 @@ def stamp(threads: int | None, device: str = "cpu") -> dict[str, Any]:
             "command": command()}
 
 
-#: The suite command a fit was made for, handed to its child process and kept in fit.json
-#: (a line scored later, by another command, names both).
 #: A suite line's ``volume`` when its mesh spans the field's crop box, as ``hybridneus mesh``
 #: makes it (lines without it were meshed over the whole cube, a coarser ruler).
 CROP_VOLUME = "crop"
@@ -122,6 +120,8 @@ def meshed_over_crop(line: dict[str, Any]) -> bool:
     return line.get("volume") == CROP_VOLUME
 
 
+#: The suite command a fit was made for, handed to its child process and kept in fit.json
+#: (a line scored later, by another command, names both).
 FIT_COMMAND = "HYBRIDNEUS_FIT_COMMAND"
 
 

@@ -42,9 +42,10 @@ def make_optimizer(field: HybridField, cfg: Config) -> torch.optim.Adam:
     SDF head in one of its own when ``train.lr_sdf_head`` is not 1."""
     t = cfg.train
     own_head = t.lr_sdf_head != 1.0
-    head = [q for name, q in field.named_parameters() if name.startswith("sdf_net.")]
-    others = [q for name, q in field.named_parameters()
-              if name != "variance" and not (own_head and name.startswith("sdf_net."))]
+    others, head = [], []
+    for name, q in field.named_parameters():
+        if name != "variance":
+            (head if own_head and name.startswith("sdf_net.") else others).append(q)
     groups = [{"params": others, "lr": t.lr, "name": "field"},
               {"params": [field.variance], "lr": t.lr_variance, "name": "variance"}]
     if own_head:
