@@ -24,8 +24,6 @@ from bench_early import opening_config, run_opening
 
 #: Points sampled in the crop box.
 N_POINTS = 200_000
-#: The parameters that make up the SDF head; everything else is the grid and the colour.
-HEAD = "sdf_net."
 
 
 def crop_points(crop: tuple[float, float, float], n: int, seed: int = 0):
@@ -44,8 +42,10 @@ def mixed(field, grid_state: dict, head_state: dict, points) -> object:
     """The SDF at ``points`` with the SDF head of ``head_state`` and the rest of ``grid_state``."""
     import torch
 
-    state = {k: (head_state[k] if k.startswith(HEAD) else v) for k, v in grid_state.items()}
-    field.load_state_dict(state)
+    field.load_state_dict(head_state)
+    head = {k: v.clone() for k, v in field.sdf_net.state_dict().items()}
+    field.load_state_dict(grid_state)
+    field.sdf_net.load_state_dict(head)
     with torch.no_grad():
         return field.sdf_and_features(points)[0].reshape(-1)
 

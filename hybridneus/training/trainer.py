@@ -42,10 +42,11 @@ def make_optimizer(field: HybridField, cfg: Config) -> torch.optim.Adam:
     SDF head in one of its own when ``train.lr_sdf_head`` is not 1."""
     t = cfg.train
     own_head = t.lr_sdf_head != 1.0
+    in_head = {id(q) for q in field.sdf_net.parameters()} if own_head else set()
     others, head = [], []
     for name, q in field.named_parameters():
         if name != "variance":
-            (head if own_head and name.startswith("sdf_net.") else others).append(q)
+            (head if id(q) in in_head else others).append(q)
     groups = [{"params": others, "lr": t.lr, "name": "field"},
               {"params": [field.variance], "lr": t.lr_variance, "name": "variance"}]
     if own_head:
