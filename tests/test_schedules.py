@@ -59,3 +59,12 @@ def test_schedules_are_the_same_at_the_same_progress_whatever_the_length():
     short = [S.lr_factor(S.progress(s + 1, 100), 0.05, 0.5, 0.1) for s in range(0, 100, 10)]
     long = [S.lr_factor(S.progress(s + 1, 1000), 0.05, 0.5, 0.1) for s in range(9, 1000, 100)]
     assert short == pytest.approx(long)
+
+
+def test_the_sdf_heads_rate_rises_geometrically_to_the_fields_then_holds():
+    assert S.head_rate(0.0, 0.1, 0.3) == pytest.approx(0.1)
+    assert S.head_rate(0.15, 0.1, 0.3) == pytest.approx(math.sqrt(0.1))  # half way, in log
+    assert S.head_rate(0.3, 0.1, 0.3) == pytest.approx(1.0)
+    assert S.head_rate(0.9, 0.1, 0.3) == pytest.approx(1.0)
+    for p in (0.0, 0.5, 1.0):  # no rise: the share holds
+        assert S.head_rate(p, 0.1, 0.0) == pytest.approx(0.1)

@@ -397,6 +397,19 @@ def test_the_sdf_head_learns_at_its_own_rate_on_the_same_schedule(scene):
     assert 0 < moved["0.1"] < 0.5 * moved["1.0"]
 
 
+def test_an_sdf_head_rate_with_until_rises_to_the_fields_rate(scene):
+    trainer = prepare(scene, tiny("train.iters=8", "train.lr_sdf_head=0.1",
+                                  "train.lr_sdf_head_until=0.5"), device="cpu")[0]
+    groups = {g["name"]: g for g in trainer.optimizer.param_groups}
+    shares = []
+    trainer.fit([lambda t, lg: shares.append(groups["sdf_head"]["lr"] / groups["field"]["lr"])],
+                progress=False)
+    assert len(shares) == 8
+    assert shares[0] == pytest.approx(0.1 ** (1 - 1 / 4))  # rates are set at a step's end
+    assert all(a < b for a, b in zip(shares[:4], shares[1:4], strict=False))
+    assert shares[3:] == pytest.approx([1.0] * 5)
+
+
 def test_resume_with_an_sdf_head_rate_continues_with_identical_state(scene, tmp_path):
     cfg = tiny("train.iters=6", "train.checkpoint_every=3", "train.seed=5",
                "train.lr_sdf_head=0.2")

@@ -76,6 +76,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("train.window", lambda v: v in ("per_iteration", "per_load"), "per_iteration or per_load"),
     ("train.view_balance", _fraction, "a share in [0, 1]"),
     ("train.lr_sdf_head", lambda v: v > 0, "> 0"),
+    ("train.lr_sdf_head_until", _fraction, "a fraction of training in [0, 1]"),
     ("train.supervision", lambda v: v in ("events", "rgb"), "'events' or 'rgb'"),
     ("loss.n_random_points", lambda v: v >= 0, ">= 0"),
     ("estimate.eps_max", lambda v: v >= 0, ">= 0 (0: no cap)"),

@@ -113,6 +113,8 @@ class TrainConfig:
     # step, and its hidden units are all positive, so the head can shift the whole SDF by
     # tenths within a few steps (docs/accuracy.md, "Why a field empties").
     lr_sdf_head: float = 1.0  # the SDF head's learning rate, as a multiple of train.lr
+    # 0 holds train.lr_sdf_head throughout; otherwise it rises geometrically to 1 by then
+    lr_sdf_head_until: float = 0.0  # fraction of training at which the SDF head reaches train.lr
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
     # A tenth: warmed up over 0.005, fields emptied or ran away in sharpness while only the

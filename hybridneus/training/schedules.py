@@ -47,6 +47,18 @@ def geometric(p: float, start: float, end: float, at: float) -> float:
     return start * (end / start) ** min(1.0, p / at)
 
 
+def head_rate(p: float, start: float, until: float) -> float:
+    """The SDF head's learning rate as a share of the field's at ``p``: ``start``, rising
+    geometrically to 1 at ``until`` and held there; ``start`` throughout when ``until <= 0``.
+
+    A head slowed only while the field opens keeps the opening from emptying and still lets
+    the head follow the grid's fine levels later on.
+    """
+    if until <= 0:
+        return start
+    return geometric(p, start, 1.0, until)
+
+
 def sharpness_floor(
     p: float, start: float, floor: float, at: float, delay: float = 0.0, blend: float = 0.0
 ) -> float:

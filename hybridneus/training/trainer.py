@@ -188,8 +188,10 @@ class Trainer:
         factor = schedules.lr_factor(p_end, t.warmup, t.decay_start, t.decay_final)
         for prior in self.priors:
             factor *= prior.lr_scale(self)
+        # the head's group was made at train.lr * lr_sdf_head: rescale it to the share due now
+        head = schedules.head_rate(p_end, t.lr_sdf_head, t.lr_sdf_head_until) / t.lr_sdf_head
         for group, base in zip(self.optimizer.param_groups, self.base_lrs, strict=True):
-            group["lr"] = base * factor
+            group["lr"] = base * factor * (head if group.get("name") == "sdf_head" else 1.0)
         if self.pose_optimizer is not None:
             self.pose_optimizer.set_lr(self.cfg.refine.pose_lr * factor)
         return factor
