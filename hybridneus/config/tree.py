@@ -112,12 +112,12 @@ class TrainConfig:
     # Adam moves every weight of the SDF head's output row by about the learning rate per
     # step, and its hidden units are all positive, so the head can shift the whole SDF by
     # tenths within a few steps (docs/accuracy.md, "Why a field empties").
-    lr_sdf_head: float = 1.0  # the SDF head's learning rate, as a multiple of train.lr
+    lr_sdf_head: float = 0.1  # the SDF head's learning rate, as a multiple of train.lr
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
     # A tenth: warmed up over 0.005, fields emptied or ran away in sharpness while only the
     # coarse levels were open (docs/accuracy.md, "A longer warm-up").
-    warmup: float = 0.1  # fraction of training over which the learning rate warms up
+    warmup: float = 0.005  # fraction of training over which the learning rate warms up
     decay_start: float = 0.5  # fraction of training after which the lr decays exponentially
     decay_final: float = 0.1  # lr multiplier reached at the last step
     seed: int = 0  # seeds torch, the ray jitter and the event-window sampler
@@ -371,6 +371,7 @@ def _eventneus() -> Config:
     cfg.priors.hull.enabled = False  # the paper has no silhouette prior
     cfg.priors.curvature.enabled = False  # nor a smoothness prior
     cfg.train.warmup = 0.01
+    cfg.train.lr_sdf_head = 1.0
     return cfg
 
 
