@@ -406,7 +406,7 @@ def test_an_sdf_head_rate_with_until_rises_to_the_fields_rate(scene):
                 progress=False)
     assert len(shares) == 8
     assert shares[0] == pytest.approx(0.1 ** (1 - 1 / 4))  # rates are set at a step's end
-    assert all(a < b for a, b in zip(shares[:4], shares[1:4], strict=False))
+    assert all(a < b for a, b in zip(shares[:3], shares[1:4], strict=True))  # rising
     assert shares[3:] == pytest.approx([1.0] * 5)
 
 

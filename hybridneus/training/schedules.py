@@ -51,8 +51,8 @@ def head_rate(p: float, start: float, until: float) -> float:
     """The SDF head's learning rate as a share of the field's at ``p``: ``start``, rising
     geometrically to 1 at ``until`` and held there; ``start`` throughout when ``until <= 0``.
 
-    A head slowed only while the field opens keeps the opening from emptying and still lets
-    the head follow the grid's fine levels later on.
+    Fields empty in the opening steps (docs/accuracy.md, "Why a field empties"); a head slowed
+    only there learns at the field's rate for the rest of the fit.
     """
     if until <= 0:
         return start
