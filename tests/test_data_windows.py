@@ -129,6 +129,27 @@ def test_batch_target_rays_and_dtypes(tmp_path):
     assert b.to("cpu").target.device.type == "cpu"
 
 
+def test_a_steps_pixels_are_shared_among_windows_and_joined_in_order(tmp_path):
+    from hybridneus.data.windows import concat_batches
+
+    ds = _split(tmp_path, random_events(3000, 5, seed=1))
+    s = EventWindowSampler(ds.splits["train"], ds.preset, seed=0)
+    parts = s.sample_windows(10, 3)
+    assert [len(b) for b in parts] == [4, 3, 3]
+    assert len({(b.view0, b.view1) for b in parts}) > 1  # windows of their own
+    joined = concat_batches(parts)
+    assert len(joined) == 10 and joined.view1 == parts[0].view1
+    for name in ("origins0", "dirs1", "target", "bayer", "xy"):
+        torch.testing.assert_close(getattr(joined, name),
+                                   torch.cat([getattr(b, name) for b in parts]))
+    assert concat_batches(parts[:1]) is parts[0]
+    # one window per step is the plain batch, drawn with the same random numbers
+    again = EventWindowSampler(ds.splits["train"], ds.preset, seed=0)
+    one = EventWindowSampler(ds.splits["train"], ds.preset, seed=0).sample_windows(8, 1)
+    torch.testing.assert_close(one[0].target, again.sample(8).target)
+    assert [len(b) for b in s.sample_windows(2, 5)] == [1, 1]  # never a window without pixels
+
+
 def test_pose_interpolation_endpoints(tmp_path):
     sp_ds = _split(tmp_path, random_events(500, 5))
     s = EventWindowSampler(sp_ds.splits["train"], sp_ds.preset)

@@ -252,6 +252,34 @@ def test_a_fit_learns_and_resumes_knots_and_a_clock_offset(scene, tmp_path, gaug
     assert torch.equal(again["pose_clock"], state["pose_clock"])
 
 
+def test_with_several_windows_a_step_corrects_the_views_of_every_window(scene, tmp_path,
+                                                                         monkeypatch):
+    from hybridneus.api import fit
+    from hybridneus.model.poses import PoseCorrections
+    from hybridneus.training import runs
+
+    # Per-view corrections learn only from the windows that end (or start) at their view: a
+    # step of one window moves at most four of them, a step of eight up to 32.
+    seen = []
+    move = PoseCorrections.move_rays
+
+    def recording(self, origins, dirs, rot, view):
+        seen.append(view)
+        return move(self, origins, dirs, rot, view)
+
+    monkeypatch.setattr(PoseCorrections, "move_rays", recording)
+    moved = {}
+    for windows in (1, 8):
+        seen.clear()
+        cfg = tiny("train.iters=4", "refine.poses=true", "refine.pose_start=0.0",
+                   "refine.pose_lr=0.01", "train.seed=3", f"train.windows_per_step={windows}")
+        done = fit(scene, cfg, out=tmp_path / str(windows), device="cpu")
+        assert len(seen) == 4 * 2 * windows  # both ends of every window, every step
+        delta = runs.load_checkpoint(done.run_dir)["poses"]
+        moved[windows] = int((delta.abs().sum(1) > 0).sum())
+    assert moved[1] <= 4 * 4 < moved[8]
+
+
 def test_before_its_start_the_correction_stays_zero_and_takes_no_gradient(
         scene, tmp_path, monkeypatch):
     from fitting import stop_at

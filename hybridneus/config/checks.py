@@ -75,6 +75,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("train.checkpoint_seconds", lambda v: v >= 0, ">= 0 (0: by steps only)"),
     ("train.window", lambda v: v in ("per_iteration", "per_load"), "per_iteration or per_load"),
     ("train.view_balance", _fraction, "a share in [0, 1]"),
+    ("train.windows_per_step", lambda v: v >= 1, ">= 1"),
     ("train.lr_sdf_head", lambda v: v > 0, "> 0"),
     ("train.lr_sdf_head_until", _fraction, "a fraction of training in [0, 1]"),
     ("train.supervision", lambda v: v in ("events", "rgb"), "'events' or 'rgb'"),
@@ -98,6 +99,8 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("refine.pose_start", _fraction, "a fraction of training in [0, 1]"),
     ("refine.pose_weight", lambda v: v >= 0, ">= 0"),
     ("refine.pose_knots", lambda v: v >= 0, ">= 0 (0: one correction per view)"),
+    ("refine.pose_smoothing", lambda v: v >= 0, ">= 0 (0: off)"),
+    ("refine.pose_smoothing_order", lambda v: v >= 1, ">= 1"),
 ]
 
 

@@ -130,6 +130,9 @@ class TrainConfig:
     checkpoint_seconds: float = 60.0  # a checkpoint at least this often, wall seconds (0: off)
     window: str = "per_iteration"  # event-window sampling: per_iteration | per_load
     view_balance: float = 0.0  # share of windows drawn evenly over viewing directions
+    # 1: every step is one window's pixels. More spread a step's pixels over that many
+    # windows, so that per-view pose corrections (refine.poses) learn from many views a step.
+    windows_per_step: int = 1  # event windows sharing a step's pixels
     supervision: str = "events"  # events, or rgb: the rgb/ frames (2 * n_rays pixels per step)
 
 
@@ -309,6 +312,9 @@ class RefineConfig:
     pose_start: float = 0.5  # fraction of training before which the corrections stay zero
     pose_weight: float = 0.01  # weight of the corrections' mean square (keeps them small)
     pose_gauge: bool = False  # take the track's common shift, turn and scale out of the corrections
+    # views: filter the given track's jitter before the fit (docs/training.md; 0: off)
+    pose_smoothing: int = 0  # window of the track's local polynomial fit, views (odd)
+    pose_smoothing_order: int = 5  # degree of that polynomial
 
 
 @dataclass

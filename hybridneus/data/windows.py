@@ -195,6 +195,23 @@ class RayBatch:
         return int(self.target.shape[0])
 
 
+def concat_batches(batches: list[RayBatch]) -> RayBatch:
+    """One batch of the rays of several windows, in order (the rendering and the event loss
+    treat every ray alike). The per-window fields (``view0`` ... ``rot1``) are the first
+    window's: a pose correction has to move each window's rays before they are joined.
+    """
+    if len(batches) == 1:
+        return batches[0]
+    first = batches[0]
+    values = {}
+    for f in fields(first):
+        v = getattr(first, f.name)
+        if isinstance(v, torch.Tensor) and f.name not in ("rot0", "rot1"):
+            v = torch.cat([getattr(b, f.name) for b in batches])
+        values[f.name] = v
+    return RayBatch(**values)
+
+
 def direction_weights(c2w: np.ndarray, radius_deg: float = 10.0) -> np.ndarray:
     """(n_views,) weights summing to 1 that even out the viewing directions of ``c2w``
     (n_views, 4, 4): each view's is 1 over the number of views looking within
@@ -302,6 +319,13 @@ class EventWindowSampler:
         idx[:n_pos] = active[self.rng.integers(0, active.size, size=n_pos)]
         idx[n_pos:] = self.rng.integers(0, h * w, size=n_rays - n_pos)
         return np.stack([idx % w, idx // w], axis=1)
+
+    def sample_windows(self, n_rays: int, windows: int) -> list[RayBatch]:
+        """``windows`` batches of random windows sharing ``n_rays`` pixels (as evenly as
+        they divide; at least one pixel each)."""
+        windows = max(1, min(windows, n_rays))
+        return [self.sample(n_rays // windows + (k < n_rays % windows))
+                for k in range(windows)]
 
     def sample(self, n_rays: int) -> RayBatch:
         """A batch of ``n_rays`` pixels of one random window.

@@ -126,7 +126,7 @@ class RunLogger:
         from hybridneus.model.poses import pose_errors
         from hybridneus.training.previews import write_pose_corrections
 
-        given = np.asarray(trainer.split.c2w, dtype=np.float64)
+        given = np.asarray(trainer.given_c2w, dtype=np.float64)
         with atomic_path(self.run_dir / POSES) as tmp:
             np.savez(tmp, given=given, refined=refined,
                      views=np.asarray(trainer.split.view_names))

@@ -20,7 +20,7 @@ import torch
 
 from hybridneus.config import Config
 from hybridneus.data.frames import FrameBatch
-from hybridneus.data.windows import RayBatch
+from hybridneus.data.windows import RayBatch, concat_batches
 from hybridneus.errors import RunError
 from hybridneus.model.crop import crop_aabb
 from hybridneus.model.field import HybridField
@@ -89,6 +89,14 @@ class Trainer:
         self.device = torch.device(device)
         self.dataset = dataset
         self.split = dataset[cfg.data.split]
+        self.given_c2w = self.split.c2w  # the poses as the data states them
+        if cfg.refine.pose_smoothing:
+            import dataclasses
+
+            from hybridneus.data.track import smooth_track
+
+            self.split = dataclasses.replace(self.split, c2w=smooth_track(
+                self.split.c2w, cfg.refine.pose_smoothing, cfg.refine.pose_smoothing_order))
         self.preset = dataset.preset
         if cfg.train.threads > 0:
             torch.set_num_threads(cfg.train.threads)
@@ -176,11 +184,14 @@ class Trainer:
             self.occupied_fraction = self.occupancy.update(
                 self.field.raw_sdf, float(self.field.inv_s().detach()), r.occupancy_band, r.chunk)
 
-    def next_batch(self) -> RayBatch | FrameBatch:
-        """The step's pixels: an event window's, or (RGB supervision) a frame's."""
+    def next_batch(self) -> list[RayBatch] | FrameBatch:
+        """The step's pixels: those of ``train.windows_per_step`` event windows (one batch
+        each), or (RGB supervision) a frame's."""
         if self.frames is not None:
             return self.frames.sample(2 * self.record.n_rays)
-        return self.windows.sample(self.record.n_rays).to(self.device)
+        return [b.to(self.device) for b in
+                self.windows.sample_windows(self.record.n_rays,
+                                            self.cfg.train.windows_per_step)]
 
     def _set_learning_rate(self) -> float:
         t = self.cfg.train
@@ -215,20 +226,25 @@ class Trainer:
             self.refresh_occupancy()
         batch = self.next_batch()
         learn_poses = self._poses_learn()
-        if self.poses is not None and isinstance(batch, RayBatch):
-            # Rays that carry a gradient to the corrections make the backward pass compute
-            # the grid's gradient at every sample point too: only while the poses learn.
-            with torch.set_grad_enabled(learn_poses):
-                batch = self._corrected(batch)
+        views: list[float] = []
+        if isinstance(batch, list):
+            views = [v for b in batch for v in (b.view0, b.view1)]
+            if self.poses is not None:
+                # Rays that carry a gradient to the corrections make the backward pass
+                # compute the grid's gradient at every sample point too: only while the
+                # poses learn.
+                with torch.set_grad_enabled(learn_poses):
+                    batch = [self._corrected(b) for b in batch]
+            batch = concat_batches(batch)
         origins, dirs = batch_rays(batch)
         out = render_rays(self.field, origins, dirs, self.sampler, self.generator, True,
                           cfg.render.crop_softness)
         ctx = StepContext(self.field, out, origins, dirs, p, self.generator, batch)
         terms = self.objective(ctx, batch, self.tonemap_eps())
-        if self.poses is not None:
+        if self.poses is not None and views:
             with torch.set_grad_enabled(learn_poses):
                 terms["pose"] = (cfg.refine.pose_weight,
-                                 self.poses.regulariser([batch.view0, batch.view1]))
+                                 self.poses.regulariser(views))
         total = sum(weight * value for weight, value in terms.values())
         self.optimizer.zero_grad(set_to_none=True)
         # Only the trained parameters: the sample points are leaves that require grad (for
@@ -269,8 +285,11 @@ class Trainer:
         return dataclasses.replace(batch, origins0=o0, dirs0=d0, origins1=o1, dirs1=d1)
 
     def refined_poses(self):
-        """(n_views, 4, 4) training poses with the learned corrections, or ``None``."""
-        return None if self.poses is None else self.poses.corrected(self.split.c2w)
+        """(n_views, 4, 4) training poses as trained (smoothed, with the learned corrections),
+        or ``None`` when the fit used them as given."""
+        if self.poses is not None:
+            return self.poses.corrected(self.split.c2w)
+        return self.split.c2w if self.cfg.refine.pose_smoothing else None
 
     # ------------------------------------------------------------------ loop
 
