@@ -9,6 +9,7 @@ the pixels per step; :mod:`hybridneus.training.scene`).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -91,8 +92,6 @@ class Trainer:
         self.split = dataset[cfg.data.split]
         self.given_c2w = self.split.c2w  # the poses as the data states them
         if cfg.refine.pose_smoothing:
-            import dataclasses
-
             from hybridneus.data.track import smooth_track
 
             self.split = dataclasses.replace(self.split, c2w=smooth_track(
@@ -278,8 +277,6 @@ class Trainer:
 
     def _corrected(self, batch: RayBatch) -> RayBatch:
         """The batch's rays moved onto the corrected poses (differentiably)."""
-        import dataclasses
-
         o0, d0 = self.poses.move_rays(batch.origins0, batch.dirs0, batch.rot0, batch.view0)
         o1, d1 = self.poses.move_rays(batch.origins1, batch.dirs1, batch.rot1, batch.view1)
         return dataclasses.replace(batch, origins0=o0, dirs0=d0, origins1=o1, dirs1=d1)
