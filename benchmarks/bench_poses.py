@@ -30,6 +30,7 @@ from pathlib import Path
 
 import common
 import numpy as np
+import yaml
 from bench_roundtrip import add_fit_arguments, fit, score
 
 
@@ -112,6 +113,7 @@ def main() -> None:
         scores[name] = score(args, run_dir, folder)
         print(f"[poses] {name}: CD {scores[name]['chamfer']}", file=sys.stderr, flush=True)
     refined = np.load(runs["refined"] / "poses_refined.npz")["refined"]
+    record = yaml.safe_load((runs["refined"] / "scene.yaml").read_text())
     e, g, r = (scores[k]["chamfer"] for k in ("exact", "given", "refined"))
     step = {k: scores[k]["fit_s"] / max(scores[k]["steps"], 1) for k in scores}
     line = {"bench": "poses", **common.stamp(args.threads), "scene": args.scene,
@@ -127,6 +129,8 @@ def main() -> None:
             "exact_refined_ratio": round(scores["exact_refined"]["chamfer"] / e, 3),
             "poses_given": pose_error_summary(given, truth),
             "poses_refined": pose_error_summary(refined, truth),
+            # the smoothing window the fit chose from the track (refine.pose_smoothing=-1)
+            "pose_window": record.get("pose_window"),
             "step_time_ratio": round(step["refined"] / step["given"], 3),
             "exact_step_time_ratio": round(step["exact_refined"] / step["exact"], 3),
             "fits": scores}

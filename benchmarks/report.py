@@ -412,6 +412,8 @@ def poses_section(rows: list[dict]) -> list[str]:
         n = r["pose_noise"]
         drift = f", drift {n['smooth_views']:g}" if n.get("smooth_views") else ""
         sets = " ".join(f"`{s}`" for s in r.get("refine_sets") or []) or "per view"
+        if r.get("pose_window") is not None:
+            sets += f" (chose {r['pose_window']} views)"
         pose = [f"{p['rot_deg_mean']:.2f} ({p['rot_deg_max']:.2f}) deg, "
                 f"{p['centre_pct_mean']:.2f} ({p['centre_pct_max']:.2f}) %"
                 for p in (r["poses_given"], r["poses_refined"])]

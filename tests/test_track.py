@@ -7,7 +7,7 @@ import pytest
 from fitting import tiny
 from scipy.spatial.transform import Rotation
 
-from hybridneus.data.track import smooth_track
+from hybridneus.data.track import choose_window, filter_is_exact, smooth_track
 from hybridneus.model.poses import pose_errors
 
 
@@ -67,6 +67,47 @@ def test_a_track_too_short_for_the_window_is_shortened_or_kept():
         smooth_track(given, -1)
 
 
+def test_windows_whose_filter_scipy_cannot_compute_are_refused():
+    # scipy's coefficients lose precision for long windows of high order; such a filter
+    # pulls the track towards the origin instead of smoothing it
+    from scipy.signal import savgol_filter
+
+    from hybridneus.config import apply_overrides, preset_config, validate
+    from hybridneus.errors import ConfigError
+
+    truth = _orbit(600)
+    assert filter_is_exact(41, 5) and filter_is_exact(111, 7)
+    assert not filter_is_exact(181, 7) and not filter_is_exact(801, 5)
+    shrunk = savgol_filter(truth[:, :3, 3], 181, 7, axis=0, mode="interp")
+    assert np.linalg.norm(shrunk - truth[:, :3, 3], axis=1).max() > 0.5  # the case is real
+    with pytest.raises(ValueError, match="numerically unstable"):
+        smooth_track(truth, 181, order=7)
+    cfg = apply_overrides(preset_config("fast"),
+                          ["refine.pose_smoothing=181", "refine.pose_smoothing_order=7"])
+    with pytest.raises(ConfigError, match=r"refine.pose_smoothing: .* at most 1\d\d views"):
+        validate(cfg)
+    validate(apply_overrides(preset_config("fast"), ["refine.pose_smoothing=-1"]))
+    with pytest.raises(ConfigError, match="refine.pose_smoothing"):
+        validate(apply_overrides(preset_config("fast"), ["refine.pose_smoothing=-2"]))
+
+
+def test_the_track_chooses_a_longer_window_the_more_it_jitters():
+    truth = _orbit(900, turns=3.0)
+    shortest = 7  # order 5 + 2
+    assert choose_window(truth, 5) == shortest  # nothing to take out: bend the motion least
+    chosen = {}
+    for degrees, shift in ((0.1, 0.002), (0.5, 0.01), (2.0, 0.04)):
+        given = _jitter(truth, degrees, shift, seed=3)
+        w = chosen[degrees] = choose_window(given, 5)
+        errors = {v: pose_errors(smooth_track(given, v), truth) for v in (shortest, w, 21, 61)}
+        # the chosen window does better than the shortest and near the best of the others
+        assert errors[w][0].mean() < errors[shortest][0].mean()
+        best = min(e[0].mean() + 50 * e[1].mean() for e in errors.values())
+        assert errors[w][0].mean() + 50 * errors[w][1].mean() < 1.25 * best
+    assert chosen[0.1] < chosen[0.5] < chosen[2.0]
+    assert choose_window(truth[:20], 5) == 0  # too short to score
+
+
 def test_a_fit_trains_on_the_smoothed_track_and_saves_it(scene, tmp_path):
     from hybridneus.api import fit
     from hybridneus.data.dataset import load_dataset
@@ -84,3 +125,19 @@ def test_a_fit_trains_on_the_smoothed_track_and_saves_it(scene, tmp_path):
     np.testing.assert_allclose(state["scene"]["cameras"], saved["refined"][:, :3, 3])
     plain = fit(scene, tiny("train.iters=2"), out=tmp_path / "b", device="cpu")
     assert not (plain.run_dir / POSES).exists()
+
+
+def test_a_fit_chooses_its_window_from_the_track_and_records_it(scene, tmp_path):
+    from hybridneus.api import fit
+    from hybridneus.data.dataset import load_dataset
+    from hybridneus.training.runlog import POSES
+    from hybridneus.training.scene import FILENAME, SceneRecord
+
+    given = load_dataset(scene, splits=["train"]).splits["train"].c2w
+    done = fit(scene, tiny("train.iters=2", "refine.pose_smoothing=-1"), out=tmp_path,
+               device="cpu")
+    record = SceneRecord.load(done.run_dir / FILENAME)
+    assert record.pose_window == choose_window(given, 5)
+    np.testing.assert_allclose(np.load(done.run_dir / POSES)["refined"],
+                               smooth_track(given, record.pose_window))
+    assert any("smoothed over" in line or "too short" in line for line in record.lines())

@@ -99,7 +99,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("refine.pose_start", _fraction, "a fraction of training in [0, 1]"),
     ("refine.pose_weight", lambda v: v >= 0, ">= 0"),
     ("refine.pose_knots", lambda v: v >= 0, ">= 0 (0: one correction per view)"),
-    ("refine.pose_smoothing", lambda v: v >= 0, ">= 0 (0: off)"),
+    ("refine.pose_smoothing", lambda v: v >= -1, ">= -1 (0: off, -1: chosen from the track)"),
     ("refine.pose_smoothing_order", lambda v: v >= 1, ">= 1"),
 ]
 
@@ -130,6 +130,7 @@ def validate(cfg: Config) -> Config:
     if cfg.field.shading_headlight and cfg.field.shading_degree == 0:
         raise ConfigError("field.shading_headlight: needs field.shading_degree > 0 (the "
                           "shaded colour model)")
+    _check_pose_smoothing(cfg.refine.pose_smoothing, cfg.refine.pose_smoothing_order)
     weights = [f"loss.{f.name}" for f in dataclasses.fields(cfg.loss)
                if f.name.startswith("lambda_")]
     weights += [f"priors.{f.name}.weight" for f in dataclasses.fields(cfg.priors)
@@ -139,3 +140,18 @@ def validate(cfg: Config) -> Config:
         if not (value >= 0 and value == value):
             raise ConfigError(f"{key}: expected a weight >= 0, got {value!r}")
     return cfg
+
+
+def _check_pose_smoothing(window: int, order: int) -> None:
+    """A window whose filter scipy cannot compute exactly would shrink the track instead of
+    smoothing it (:func:`hybridneus.data.track.filter_is_exact`): refuse it before the load."""
+    from hybridneus.data.track import filter_is_exact
+
+    odd = window - (1 - window % 2)
+    if odd < order + 2 or filter_is_exact(odd, order):
+        return
+    longest = max((w for w in range(order + 2 + (order % 2 == 0), odd, 2)
+                   if filter_is_exact(w, order)), default=0)
+    raise ConfigError(f"refine.pose_smoothing: a {window}-view window of order {order} is "
+                      f"numerically unstable; use at most {longest} views, or a lower "
+                      "refine.pose_smoothing_order")

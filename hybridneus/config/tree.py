@@ -313,7 +313,7 @@ class RefineConfig:
     pose_weight: float = 0.01  # weight of the corrections' mean square (keeps them small)
     pose_gauge: bool = False  # take the track's common shift, turn and scale out of the corrections
     # views: filter the given track's jitter before the fit (docs/training.md; 0: off)
-    pose_smoothing: int = 0  # window of the track's local polynomial fit, views (odd)
+    pose_smoothing: int = 0  # window of the track's polynomial fit, views (odd; -1: from the track)
     pose_smoothing_order: int = 5  # degree of that polynomial
 
 

@@ -46,6 +46,9 @@ class SceneRecord:
         device: the device trained on.
         stopped_at: the step a budgeted fit stopped at because the machine ran slower than
             its probe measured (the schedule still counts ``steps``); ``None``: it ran them all.
+        pose_window: the views the training track was smoothed over where the fit chose
+            them from the track (``refine.pose_smoothing=-1``; 0: too short to smooth),
+            else ``None``.
         version: the hybridneus version that wrote the record.
     """
 
@@ -61,6 +64,7 @@ class SceneRecord:
     device: str = "cpu"
     version: str = ""
     stopped_at: int | None = None
+    pose_window: int | None = None
 
     def preset_overrides(self) -> dict[str, Any]:
         """The preset values to give the dataset reader so that it uses this record's."""
@@ -80,6 +84,10 @@ class SceneRecord:
         out.append(crop + _how(self.estimated.get("crop_r")))
         out.append(f"  {self.steps} steps ({self.steps_from}), {self.n_rays} pixels per step "
                    f"on {self.device}")
+        if self.pose_window is not None:
+            out.append(f"  training poses smoothed over {self.pose_window} views (chosen from "
+                       "the track)" if self.pose_window else
+                       "  training poses as given (the track is too short to smooth)")
         if self.stopped_at is not None:
             out.append(f"  stopped at step {self.stopped_at}: the time budget ran out")
         return out

@@ -92,10 +92,13 @@ class Trainer:
         self.split = dataset[cfg.data.split]
         self.given_c2w = self.split.c2w  # the poses as the data states them
         if cfg.refine.pose_smoothing:
-            from hybridneus.data.track import smooth_track
+            from hybridneus.data.track import choose_window, smooth_track
 
-            self.split = dataclasses.replace(self.split, c2w=smooth_track(
-                self.split.c2w, cfg.refine.pose_smoothing, cfg.refine.pose_smoothing_order))
+            window, order = cfg.refine.pose_smoothing, cfg.refine.pose_smoothing_order
+            if window < 0:
+                window = record.pose_window = choose_window(self.split.c2w, order)
+            self.split = dataclasses.replace(
+                self.split, c2w=smooth_track(self.split.c2w, window, order))
         self.preset = dataset.preset
         if cfg.train.threads > 0:
             torch.set_num_threads(cfg.train.threads)
