@@ -433,6 +433,32 @@ def poses_section(rows: list[dict]) -> list[str]:
     return out + ["", "  \n".join(commands), ""]
 
 
+def track_section(rows: list[dict]) -> list[str]:
+    """bench_track.py: the pose errors a smoothing window leaves on a jittery track."""
+    if not rows:
+        return []
+    out = ["## Track smoothing: pose errors left by each window", "",
+           "The simulator's camera paths with per-view errors in their written poses (RMS "
+           "rotation and camera-centre shift, a clock offset), smoothed as "
+           "`refine.pose_smoothing` does it: window 0 is the track as given, -1 the window "
+           "chosen from each track (the windows chosen are listed, one per noise seed). "
+           "Errors against the true poses, mean (max) over the views, averaged over the "
+           "noise seeds: rotation in degrees, camera centre in % of the camera distance. No "
+           "fit.", "",
+           "| path | views | errors (deg, share) | seeds | order | window | chosen | rotation "
+           "| centre | commit | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        chosen = ", ".join(str(w) for w in r["chosen"]) if r["window"] < 0 else "-"
+        out.append(f"| {r['path']} | {r['views']} | {r['rotation_deg']:g}, "
+                   f"{r['translation']:g} | {len(r['noise_seeds'])} | {r['order']} | "
+                   f"{r['window']} | {chosen} | {r['rot_deg_mean']:.3f} "
+                   f"({r['rot_deg_max']:.2f}) | {r['centre_pct_mean']:.3f} "
+                   f"({r['centre_pct_max']:.2f}) | {r['commit']} | {r['date'][:10]} |")
+    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
+    return out + ["", "  \n".join(commands), ""]
+
+
 def threshold_section(rows: list[dict]) -> list[str]:
     """bench_threshold.py: an unstated threshold taken from the frames."""
     if not rows:
@@ -587,6 +613,7 @@ def build(compare: list[tuple[str, str]]) -> str:
     out += cleanup_section(suite)
     out += recordings_section(results.get("recordings", []))
     out += poses_section(results.get("poses", []))
+    out += track_section(results.get("track", []))
     out += threshold_section(results.get("threshold", []))
     out += reliability_section(results.get("reliability", []))
     out += speed_section(results)

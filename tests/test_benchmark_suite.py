@@ -652,3 +652,28 @@ def test_the_rare_fill_closes_a_hole_that_only_few_views_see():
     assert filled_at(fill, (0, 0, 0)) and not filled_at(fill, (0.55, 0, 0))
     none = module.rare_fill(torus, cameras, base, share=0.01, close=0.25, stride=1)
     assert not filled_at(none, (0, 0, 0))
+
+
+def test_track_smoothing_is_scored_per_window_against_the_true_path(tmp_path):
+    out = tmp_path / "track.jsonl"
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_track.py")),
+                           "--paths", "even", "--views", "300", "--levels", "0.5:0.01",
+                           "--windows", "0", "21", "-1", "--noise-seeds", "0", "1",
+                           "--allow-dirty", "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = {line["window"]: line for line in map(json.loads, out.read_text().splitlines())}
+    assert sorted(lines) == [-1, 0, 21]
+    given, chosen = lines[0], lines[-1]
+    assert given["chosen"] == [0, 0] and len(chosen["chosen"]) == 2
+    assert all(w > 7 for w in chosen["chosen"])  # the jitter asks for more than the shortest
+    # the per-view errors of the given track are what the capture drew, and smoothing
+    # takes most of them out
+    assert 0.3 < given["rot_deg_mean"] < 0.6 and 0.6 < given["centre_pct_mean"] < 1.2
+    assert chosen["rot_deg_mean"] < given["rot_deg_mean"] / 2
+    assert chosen["centre_pct_mean"] < given["centre_pct_mean"] / 2
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    table = report.track_section(list(lines.values()))
+    assert any(f"| -1 | {chosen['chosen'][0]}, {chosen['chosen'][1]} |" in row for row in table)
