@@ -24,6 +24,7 @@ import sys
 
 import common
 import numpy as np
+from bench_poses import pose_error_stats
 
 
 def path_poses(kind: str, n_views: int) -> np.ndarray:
@@ -34,15 +35,6 @@ def path_poses(kind: str, n_views: int) -> np.ndarray:
     make = {"seiffert": seiffert_spiral, "even": even_spiral, "circle": circle}[kind]
     traj = make(n_views)
     return look_at_origin(traj.directions, traj.azimuth, CAMERA_RADIUS)
-
-
-def errors(poses: np.ndarray, truth: np.ndarray) -> dict[str, float]:
-    from hybridneus.model.poses import pose_errors
-
-    degrees, moved = pose_errors(poses, truth)
-    share = 100 * moved / np.linalg.norm(truth[:, :3, 3], axis=1)
-    return {"rot_deg_mean": float(degrees.mean()), "rot_deg_max": float(degrees.max()),
-            "centre_pct_mean": float(share.mean()), "centre_pct_max": float(share.max())}
 
 
 def main() -> None:
@@ -74,7 +66,7 @@ def main() -> None:
             for order in args.orders:
                 for window in args.windows:
                     chosen = [choose_window(g, order) if window < 0 else window for g in given]
-                    per_seed = [errors(smooth_track(g, w, order), truth)
+                    per_seed = [pose_error_stats(smooth_track(g, w, order), truth)
                                 for g, w in zip(given, chosen, strict=True)]
                     mean = {k: round(float(np.mean([e[k] for e in per_seed])), 4)
                             for k in per_seed[0]}

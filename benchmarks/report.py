@@ -42,6 +42,12 @@ def _budget(line: dict) -> str:
     return f"{budget}, meshed over the crop" if common.meshed_over_crop(line) else budget
 
 
+def _command_lines(rows: list[dict]) -> list[str]:
+    """A section's closing lines: every command that made its rows, once, in order."""
+    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
+    return ["", "  \n".join(commands), ""]
+
+
 def _f(v, digits: int = 4) -> str:
     return "-" if v is None else f"{v:.{digits}f}"
 
@@ -379,8 +385,7 @@ def recordings_section(rows: list[dict]) -> list[str]:
                    f"{_f(r['chamfer_converted'])} | {r['converted_ratio']:.3f} | "
                    f"{_f(r['chamfer_mono'])} | {r['mono_ratio']:.3f} | {r['commit']} | "
                    f"{_cpu(r)} | {r['date'][:10]} |")
-    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
-    return out + ["", "  \n".join(commands), ""]
+    return out + _command_lines(rows)
 
 
 def poses_section(rows: list[dict]) -> list[str]:
@@ -429,8 +434,7 @@ def poses_section(rows: list[dict]) -> list[str]:
                    f"{pose[1]} | {r['step_time_ratio']:.2f} | "
                    f"{'-' if step_exact is None else f'{step_exact:.2f}'} | {r['commit']} | "
                    f"{_cpu(r)} | {r['date'][:10]} |")
-    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
-    return out + ["", "  \n".join(commands), ""]
+    return out + _command_lines(rows)
 
 
 def track_section(rows: list[dict]) -> list[str]:
@@ -455,8 +459,7 @@ def track_section(rows: list[dict]) -> list[str]:
                    f"{r['window']} | {chosen} | {r['rot_deg_mean']:.3f} "
                    f"({r['rot_deg_max']:.2f}) | {r['centre_pct_mean']:.3f} "
                    f"({r['centre_pct_max']:.2f}) | {r['commit']} | {r['date'][:10]} |")
-    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
-    return out + ["", "  \n".join(commands), ""]
+    return out + _command_lines(rows)
 
 
 def threshold_section(rows: list[dict]) -> list[str]:
@@ -484,8 +487,7 @@ def threshold_section(rows: list[dict]) -> list[str]:
                    f"{e['on']:.4f} / {e['off']:.4f} ({100 * r['threshold_error']:+.1f}%) | "
                    f"{r['iters'] if r['fits'] else '-'} | {told} | {est} | "
                    f"{wrong or '-'} | {r['commit']} | {_cpu(r)} | {r['date'][:10]} |")
-    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
-    return out + ["", "  \n".join(commands), ""]
+    return out + _command_lines(rows)
 
 
 def reliability_section(rows: list[dict]) -> list[str]:

@@ -145,13 +145,12 @@ def validate(cfg: Config) -> Config:
 def _check_pose_smoothing(window: int, order: int) -> None:
     """A window whose filter scipy cannot compute exactly would shrink the track instead of
     smoothing it (:func:`hybridneus.data.track.filter_is_exact`): refuse it before the load."""
-    from hybridneus.data.track import filter_is_exact
+    from hybridneus.data.track import exact_windows, filter_is_exact
 
     odd = window - (1 - window % 2)
     if odd < order + 2 or filter_is_exact(odd, order):
         return
-    longest = max((w for w in range(order + 2 + (order % 2 == 0), odd, 2)
-                   if filter_is_exact(w, order)), default=0)
+    longest = max(exact_windows(order, odd - 2), default=0)
     raise ConfigError(f"refine.pose_smoothing: a {window}-view window of order {order} is "
                       f"numerically unstable; use at most {longest} views, or a lower "
                       "refine.pose_smoothing_order")

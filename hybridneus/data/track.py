@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["choose_window", "filter_is_exact", "smooth_track"]
+__all__ = ["choose_window", "exact_windows", "filter_is_exact", "smooth_track"]
 
 # A window that predicts a view from its neighbours needs views on both sides; the shortest
 # one scored, and the share of the track the longest may span.
@@ -49,6 +49,13 @@ def filter_is_exact(window: int, order: int, tol: float = 1e-6) -> bool:
     errors = [abs(coeffs.sum() - 1.0)]
     errors += [abs(float(coeffs @ x**k)) for k in range(1, order + 1)]
     return max(errors) <= tol
+
+
+def exact_windows(order: int, longest: int) -> list[int]:
+    """The odd windows from ``order + 2`` views up to ``longest`` whose filter of ``order``
+    is exact (:func:`filter_is_exact`), shortest first."""
+    shortest = order + 2 + (order % 2 == 0)
+    return [w for w in range(shortest, longest + 1, 2) if filter_is_exact(w, order)]
 
 
 def _quaternions(c2w: np.ndarray) -> np.ndarray:
@@ -94,9 +101,7 @@ def choose_window(c2w: np.ndarray, order: int = 5) -> int:
 
     c2w = np.asarray(c2w, dtype=np.float64)
     n = len(c2w)
-    shortest = order + 2 + (order % 2 == 0)
-    candidates = [w for w in range(shortest, int(n * _LONGEST_SHARE) + 1, 2)
-                  if filter_is_exact(w, order)]
+    candidates = exact_windows(order, int(n * _LONGEST_SHARE))
     if not candidates:
         return 0
     margin = candidates[-1] // 2
