@@ -3,7 +3,9 @@
 Every figure in that page comes from a line here, with its commit, date, machine and the
 command that made it; lines from trees with uncommitted changes are left out. Groups of lines
 are summarised (mean and spread over seeds, mean over scenes); ``--compare BASE NEW`` adds a
-table of two commits' fits paired by scene, seed, preset and budget on the same machine.
+table of two commits' fits paired by scene, seed, preset and budget on the same machine;
+``--same-as OLD NEW`` lets OLD's preset fits stand beside NEW's variants where NEW repeats them
+(checked on every fit both commits made).
 
     python benchmarks/report.py                                  # writes docs/benchmarks.md
     python benchmarks/report.py --compare cf67ae4 4d2c1e0 --check
@@ -244,9 +246,46 @@ def _cd(r: dict) -> float | None:
     return r.get("chamfer")
 
 
-def variant_section(lines: list[dict]) -> list[str]:
+def _fit_key(r: dict) -> tuple:
+    return (r["scene"], r["seed"], r["preset"], _budget(r), _cpu(r))
+
+
+def stand_in(lines: list[dict], old: str, new: str) -> tuple[list[dict], int]:
+    """``lines`` with ``old``'s fits of plain presets (no overrides) copied to ``new`` for
+    the scenes and seeds ``new`` has not fitted, and the number of fits both commits made.
+
+    For a commit whose changes leave the presets' path alone (docs, tooling, a new switch
+    that is off): its variants can then be set beside the preset's fits made before it. It
+    is a claim the lines must bear out, so every fit both commits made has to score the same
+    Chamfer to the last digit, and at least one must exist."""
+    at = {c: {_fit_key(r): r for r in lines if r["commit"] == c} for c in (old, new)}
+    both = sorted(set(at[old]) & set(at[new]))
+    if not both:
+        raise SystemExit(f"--same-as {old} {new}: no fit made at both commits to show that "
+                         f"{new} repeats {old}")
+    for k in both:
+        scores = {c: {r.get("chamfer") for r in lines if r["commit"] == c and _fit_key(r) == k}
+                  for c in (old, new)}
+        if len(scores[old] | scores[new]) > 1:
+            a, b = (", ".join(sorted(map(str, scores[c]))) for c in (old, new))
+            raise SystemExit(f"--same-as {old} {new}: {k[0]} seed {k[1]} `{k[2]}` scored {a} "
+                             f"at {old} and {b} at {new}; the commits do not fit alike")
+    copies = [{**r, "commit": new, "stands_in_from": old} for k, r in at[old].items()
+              if k not in at[new] and base_preset(r["preset"]) == r["preset"]]
+    return [*lines, *copies], len(both)
+
+
+def variant_section(lines: list[dict],
+                    same_as: list[tuple[str, str]] | tuple = ()) -> list[str]:
     """Variants (a preset with overrides) against their preset's fits of the same commit,
-    budget and machine, scene by scene on the seeds both have."""
+    budget and machine, scene by scene on the seeds both have.
+
+    ``same_as``: (old, new) commit pairs for :func:`stand_in`; the preset's fits of ``old``
+    stand in for those ``new`` lacks, and the table says so."""
+    repeats: dict[str, tuple[str, int]] = {}
+    for old, new in same_as:
+        lines, n = stand_in(lines, old, new)
+        repeats[new] = (old, n)
     paired = _with_base(lines)
     if not paired:
         return []
@@ -268,8 +307,14 @@ def variant_section(lines: list[dict]) -> list[str]:
             fits[(r["preset"], r["scene"])][r["seed"]] = r
         names = [v[len(base):].strip(" +") for v in variants]
         hows = list(dict.fromkeys(_how(r) for r in rows))  # the table holds every one's fits
+        note = []
+        if commit in repeats and any(r.get("stands_in_from") for r in rows):
+            old, n = repeats[commit]
+            note = [f"`{base}` fits of {old} stand in where {commit} has none (its changes "
+                    "leave the presets' path alone: every fit made at both commits, "
+                    f"{n} of them, scores the same Chamfer to the last digit).", ""]
         out += [f"### `{base}` and its variants, {budget}, commit {commit}, {cpu}", "",
-                ("Command: " if len(hows) == 1 else "Commands: ") + "; ".join(hows), "",
+                *note, ("Command: " if len(hows) == 1 else "Commands: ") + "; ".join(hows), "",
                 f"| scene | seeds | CD `{base}` | range | "
                 + " | ".join(f"`{n}`" for n in names) + " |",
                 "|---|---|---|---|" + "---|" * len(names)]
@@ -595,14 +640,15 @@ def _table(rows: list[dict]) -> list[str]:
             *(f"| {' | '.join(_cell(f.get(c)) for c in cols)} |" for f in flat)]
 
 
-def build(compare: list[tuple[str, str]]) -> str:
+def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple = ()) -> str:
     results: dict[str, list[dict]] = {}
     for path in sorted(common.RESULTS.glob("*.jsonl")):
         clean = [r for r in common.read_lines(path) if not r.get("dirty")]
         if clean:
             results[path.stem] = clean
     suite = results.get("suite", [])
-    args = " ".join(f"--compare {b} {n}" for b, n in compare)
+    args = " ".join([*(f"--compare {b} {n}" for b, n in compare),
+                     *(f"--same-as {o} {n}" for o, n in same_as)])
     out = ["# Benchmarks", "",
            f"Generated by `python benchmarks/report.py{' ' + args if args else ''}` from the "
            "result lines in `benchmarks/results/` (do not edit by hand: rerun the command). "
@@ -610,7 +656,7 @@ def build(compare: list[tuple[str, str]]) -> str:
            "carry their commit, machine, threads, date and command.", ""]
     for base, new in compare:
         out += compare_section(suite, base, new)
-    out += variant_section(suite)
+    out += variant_section(suite, same_as)
     out += suite_section(suite)
     out += cleanup_section(suite)
     out += recordings_section(results.get("recordings", []))
@@ -625,6 +671,9 @@ def build(compare: list[tuple[str, str]]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--compare", nargs=2, action="append", default=[], metavar=("BASE", "NEW"))
+    ap.add_argument("--same-as", nargs=2, action="append", default=[], metavar=("OLD", "NEW"),
+                    help="NEW repeats OLD's preset fits: in the variant tables OLD's fits of a "
+                         "preset stand in for those NEW lacks (checked on the fits both made)")
     ap.add_argument("--out", type=Path, default=DOC)
     ap.add_argument("--check", action="store_true",
                     help="exit 1 if the page differs from what the lines give")
@@ -643,7 +692,7 @@ def main() -> None:
         if not args.check:
             README.write_text(readme)
             print(f"wrote {README}'s results for {args.readme}")
-    text = build([tuple(c) for c in args.compare])
+    text = build([tuple(c) for c in args.compare], [tuple(c) for c in args.same_as])
     if args.check:
         same = args.out.is_file() and args.out.read_text() == text
         raise SystemExit(0 if same else f"{args.out}: out of date; rerun the report")

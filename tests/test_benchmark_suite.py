@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import TINY_FIT, TINY_SIZE
 
 SUITE = Path(__file__).resolve().parents[1] / "benchmarks" / "run_suite.py"
@@ -314,6 +315,41 @@ def test_variants_are_set_beside_their_preset_on_the_same_seeds():
               {**line(spec, "slab", 5, 0.03), "command": "run_suite.py --seeds 5"}]
     text = "\n".join(report.variant_section(lines))
     assert "Commands: `run_suite.py`; `run_suite.py --seeds 5`" in text
+
+
+def test_an_older_commit_stands_in_only_where_it_fits_alike():
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    base = {"iters": 2000, "threads": 1, "machine": {"cpu": "X"}, "steps": 2000,
+            "date": "2026-11-26T10:00:00+00:00", "command": "run_suite.py"}
+
+    def line(commit, preset, seed, cd):
+        return {**base, "commit": commit, "preset": preset, "scene": "bunny", "seed": seed,
+                "chamfer": cd}
+
+    es = "fast+render.empty_share=0.25"
+    lines = [line("old1234", "fast", 1, 0.010), line("old1234", "fast", 2, 0.012),
+             line("old1234", "fast priors.hull.enabled=false", 2, 0.5),
+             line("new5678", "fast", 1, 0.010), line("new5678", es, 1, 0.009),
+             line("new5678", es, 2, 0.006)]
+    # alone, the new commit's variant meets its preset on seed 1 only
+    assert "| bunny | 1 | 0.0100 | - | 0.0090 (-10%) |" in "\n".join(
+        report.variant_section(lines))
+    text = "\n".join(report.variant_section(lines, [("old1234", "new5678")]))
+    # the old preset fit of seed 2 joins (its variant fits do not), and the table says so
+    assert "| bunny | 2 | 0.0110 | 0.0100-0.0120 | 0.0075 (-32% ! -) |" in text
+    assert "`fast` fits of old1234 stand in where new5678 has none" in text
+    assert "every fit made at both commits, 1 of them," in text
+    # the old commit's variants stay in its own table
+    ours = text.split("commit new5678")[1].split("###")[0]
+    assert "priors.hull" not in ours and "priors.hull" in text
+    # a fit both made that scores differently refuses the claim
+    lines[3] = line("new5678", "fast", 1, 0.0101)
+    with pytest.raises(SystemExit, match="do not fit alike"):
+        report.variant_section(lines, [("old1234", "new5678")])
+    with pytest.raises(SystemExit, match="no fit made at both"):
+        report.variant_section(lines[:3] + lines[4:], [("old1234", "new5678")])
 
 
 def test_the_kinds_with_few_events_get_their_own_mean():
