@@ -248,8 +248,10 @@ def test_docs_benchmarks_is_generated_from_the_result_lines():
 
     flags = report.DOC.read_text().split("`python benchmarks/report.py", 1)[1].split("`", 1)[0]
     words = flags.split()
-    compare = [(words[i + 1], words[i + 2]) for i, w in enumerate(words) if w == "--compare"]
-    assert report.DOC.read_text() == report.build(compare), "rerun python benchmarks/report.py"
+    pairs = {flag: [(words[i + 1], words[i + 2]) for i, w in enumerate(words) if w == flag]
+             for flag in ("--compare", "--same-as")}
+    assert report.DOC.read_text() == report.build(pairs["--compare"], pairs["--same-as"]), \
+        "rerun python benchmarks/report.py"
 
 
 def test_a_comparison_started_again_skips_the_fits_it_has(tmp_path):

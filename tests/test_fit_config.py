@@ -139,6 +139,21 @@ def test_keys_of_hybridneus_0_1_name_their_successor(tmp_path):
     assert cfg.estimate.crop is False and cfg.data.crop_r == 0.3
 
 
+def test_a_saved_run_keeps_what_it_was_trained_with(tmp_path):
+    from hybridneus.config.overrides import RUN_KEY_ORIGINS
+    from hybridneus.training.runs import load_run_config
+
+    # a run saved before render.empty_share existed sampled no empty space; a hand-written
+    # config without the key gets today's default
+    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  n_coarse: 24\n")
+    assert load_run_config(tmp_path).render.empty_share == RUN_KEY_ORIGINS[
+        "render.empty_share"] == 0.0
+    assert load_config(tmp_path / "config.yaml").render.empty_share == Config().render.empty_share
+    # a run that saved the key keeps its value
+    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  empty_share: 0.4\n")
+    assert load_run_config(tmp_path).render.empty_share == 0.4
+
+
 def test_yaml_round_trip_and_bad_yaml(tmp_path):
     cfg = apply_overrides(preset_config("eventneus"), ["train.seed=7", "data.crop_r=0.3"])
     save_config(cfg, tmp_path / "c.yaml")

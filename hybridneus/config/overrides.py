@@ -247,8 +247,27 @@ def save_config(cfg: Config, path: str | os.PathLike) -> None:
         tmp.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
 
 
-def load_config(path: str | os.PathLike) -> Config:
+#: Keys whose default moved after the key was added, with the value that does what the
+#: software did before the key existed. A run's saved config that lacks one of them was
+#: trained with that value, so :func:`load_config` with ``saved_run=True`` restores it
+#: instead of today's default (every other missing key's default keeps the old behaviour).
+RUN_KEY_ORIGINS: dict[str, Any] = {"render.empty_share": 0.0}
+
+
+def _has_key(data: dict[str, Any], key: str) -> bool:
+    node: Any = data
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return False
+        node = node[part]
+    return True
+
+
+def load_config(path: str | os.PathLike, saved_run: bool = False) -> Config:
     """Read a YAML written by :func:`save_config` (or by hand).
+
+    ``saved_run``: the file is a run's ``config.yaml``; keys it lacks from
+    :data:`RUN_KEY_ORIGINS` take the value the run was trained with.
 
     Raises:
         ConfigError: unreadable YAML, unknown key or wrong type (naming the file).
@@ -259,4 +278,9 @@ def load_config(path: str | os.PathLike) -> Config:
     except (OSError, yaml.YAMLError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ConfigError(f"{path}: cannot read config ({first})") from None
-    return config_from_dict(data or {}, source=str(path))
+    cfg = config_from_dict(data or {}, source=str(path))
+    if saved_run and isinstance(data, dict):
+        for key, value in RUN_KEY_ORIGINS.items():
+            if not _has_key(data, key):
+                set_value(cfg, key, value)
+    return cfg

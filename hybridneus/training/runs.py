@@ -172,7 +172,9 @@ def _read_checkpoint(path: Path, map_location: Any) -> dict[str, Any]:
 
 
 def load_run_config(run_dir: str | os.PathLike) -> Config:
-    """The resolved :class:`Config` saved in ``<run_dir>/config.yaml``.
+    """The resolved :class:`Config` saved in ``<run_dir>/config.yaml``; keys added since
+    the run was saved whose default has moved take the value it was trained with
+    (:data:`hybridneus.config.overrides.RUN_KEY_ORIGINS`).
 
     Raises:
         RunError: the file is missing. ConfigError: it does not parse.
@@ -180,7 +182,7 @@ def load_run_config(run_dir: str | os.PathLike) -> Config:
     path = Path(run_dir) / "config.yaml"
     if not path.is_file():
         raise RunError(f"{path}: config missing")
-    return load_config(path)
+    return load_config(path, saved_run=True)
 
 
 def build_field(cfg: Config, scene: dict[str, Any]):
