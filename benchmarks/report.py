@@ -159,11 +159,14 @@ def suite_section(lines: list[dict]) -> list[str]:
     return out
 
 
+def _fit_key(r: dict) -> tuple:
+    return (r["scene"], r["seed"], r["preset"], _budget(r), _cpu(r))
+
+
 def compare_section(lines: list[dict], base: str, new: str) -> list[str]:
     """Two commits' fits paired by scene, seed, preset, budget and machine."""
-    key = lambda r: (r["scene"], r["seed"], r["preset"], _budget(r), _cpu(r))  # noqa: E731
-    a = {key(r): r for r in lines if r["commit"] == base}
-    b = {key(r): r for r in lines if r["commit"] == new}
+    a = {_fit_key(r): r for r in lines if r["commit"] == base}
+    b = {_fit_key(r): r for r in lines if r["commit"] == new}
     pairs = sorted(set(a) & set(b))
     if not pairs:
         return [f"No fits of both {base} and {new} to pair.", ""]
@@ -246,10 +249,6 @@ def _cd(r: dict) -> float | None:
     return r.get("chamfer")
 
 
-def _fit_key(r: dict) -> tuple:
-    return (r["scene"], r["seed"], r["preset"], _budget(r), _cpu(r))
-
-
 def stand_in(lines: list[dict], old: str, new: str) -> tuple[list[dict], int]:
     """``lines`` with ``old``'s fits of plain presets (no overrides) copied to ``new`` for
     the scenes and seeds ``new`` has not fitted, and the number of fits both commits made.
@@ -258,20 +257,22 @@ def stand_in(lines: list[dict], old: str, new: str) -> tuple[list[dict], int]:
     that is off): its variants can then be set beside the preset's fits made before it. It
     is a claim the lines must bear out, so every fit both commits made has to score the same
     Chamfer to the last digit, and at least one must exist."""
-    at = {c: {_fit_key(r): r for r in lines if r["commit"] == c} for c in (old, new)}
+    at: dict[str, dict[tuple, list[dict]]] = {old: defaultdict(list), new: defaultdict(list)}
+    for r in lines:
+        if r["commit"] in at:
+            at[r["commit"]][_fit_key(r)].append(r)
     both = sorted(set(at[old]) & set(at[new]))
     if not both:
         raise SystemExit(f"--same-as {old} {new}: no fit made at both commits to show that "
                          f"{new} repeats {old}")
     for k in both:
-        scores = {c: {r.get("chamfer") for r in lines if r["commit"] == c and _fit_key(r) == k}
-                  for c in (old, new)}
+        scores = {c: {r.get("chamfer") for r in at[c][k]} for c in (old, new)}
         if len(scores[old] | scores[new]) > 1:
             a, b = (", ".join(sorted(map(str, scores[c]))) for c in (old, new))
             raise SystemExit(f"--same-as {old} {new}: {k[0]} seed {k[1]} `{k[2]}` scored {a} "
                              f"at {old} and {b} at {new}; the commits do not fit alike")
-    copies = [{**r, "commit": new, "stands_in_from": old} for k, r in at[old].items()
-              if k not in at[new] and base_preset(r["preset"]) == r["preset"]]
+    copies = [{**rs[-1], "commit": new, "stands_in_from": old} for k, rs in at[old].items()
+              if k not in at[new] and base_preset(k[2]) == k[2]]
     return [*lines, *copies], len(both)
 
 
