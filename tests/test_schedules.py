@@ -68,3 +68,10 @@ def test_the_sdf_heads_rate_rises_geometrically_to_the_fields_then_holds():
     assert S.head_rate(0.9, 0.1, 0.3) == pytest.approx(1.0)
     for p in (0.0, 0.5, 1.0):  # no rise: the share holds
         assert S.head_rate(p, 0.1, 0.0) == pytest.approx(0.1)
+
+
+def test_the_empty_share_holds_then_fades_out_over_a_tenth():
+    assert [S.empty_share(p, 0.25, 0.6) for p in (0.0, 0.6, 0.65, 0.7, 1.0)] == pytest.approx(
+        [0.25, 0.25, 0.125, 0.0, 0.0])
+    assert S.empty_share(0.99, 0.25, 1.0) == 0.25  # until 1: throughout
+    assert S.empty_share(0.0, 0.25, 0.0) == 0.25 and S.empty_share(0.1, 0.25, 0.0) == 0.0

@@ -419,3 +419,13 @@ def test_resume_with_an_sdf_head_rate_continues_with_identical_state(scene, tmp_
     a, b = params(straight), params(resumed)
     for k in a:
         assert torch.equal(a[k], b[k]), k
+
+
+def test_the_sampler_spreads_samples_over_empty_space_on_the_schedule(scene):
+    trainer, _ = prepare(scene, tiny("train.iters=10", "render.empty_share=0.3",
+                                     "render.empty_share_until=0.5"), device="cpu")
+    trainer.train_step()
+    assert trainer.sampler.empty_share == pytest.approx(0.3)
+    trainer.step = 8  # progress 0.8, past the fade
+    trainer.train_step()
+    assert trainer.sampler.empty_share == 0.0

@@ -57,6 +57,7 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("render.near_min", lambda v: v >= 0, ">= 0"),
     ("render.crop_softness", lambda v: v >= 0, ">= 0"),
     ("render.empty_share", _fraction, "a share in [0, 1]"),
+    ("render.empty_share_until", _fraction, "a fraction of training in [0, 1]"),
     ("train.iters", lambda v: v >= 1, ">= 1"),
     ("train.minutes", lambda v: v >= 0, ">= 0 (0: no budget)"),
     ("train.replan_at", lambda v: all(0 < a < 1 for a in v) and list(v) == sorted(v),

@@ -91,3 +91,21 @@ def fading(p: float, end: float) -> float:
     if end <= 0:
         return 1.0
     return max(0.0, 1.0 - p / end)
+
+
+#: Share of training over which ``render.empty_share`` fades out after ``empty_share_until``.
+EMPTY_SHARE_FADE = 0.1
+
+
+def empty_share(p: float, share: float, until: float) -> float:
+    """The share of coarse samples spread over the whole ray at ``p``: ``share`` until
+    ``until``, then falling linearly to 0 over :data:`EMPTY_SHARE_FADE` (``share``
+    throughout when ``until >= 1``).
+
+    Samples spread over empty space let lost matter grow back, which happens in the middle
+    of a fit; at its end they are samples taken away from the surface the field holds
+    (docs/accuracy.md, "Samples where the occupancy grid sees nothing").
+    """
+    if until >= 1.0:
+        return share
+    return share * (1.0 - ramp(p, until, EMPTY_SHARE_FADE))

@@ -224,6 +224,8 @@ class Trainer:
         self.field.update_step(self.step, self.total_steps)
         anneal = cfg.render.cos_anneal_at
         self.field.cos_anneal = 1.0 if anneal <= 0 else min(1.0, p / anneal)
+        self.sampler.empty_share = schedules.empty_share(p, cfg.render.empty_share,
+                                                         cfg.render.empty_share_until)
         if self.step % max(cfg.render.occupancy_every, 1) == 0:
             self.refresh_occupancy()
         batch = self.next_batch()
