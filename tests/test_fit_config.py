@@ -139,19 +139,26 @@ def test_keys_of_hybridneus_0_1_name_their_successor(tmp_path):
     assert cfg.estimate.crop is False and cfg.data.crop_r == 0.3
 
 
-def test_a_saved_run_keeps_what_it_was_trained_with(tmp_path):
+def test_a_saved_run_keeps_what_it_was_trained_with(tmp_path, monkeypatch):
     from hybridneus.config.overrides import RUN_KEY_ORIGINS
     from hybridneus.training.runs import load_run_config
 
-    # a run saved before render.empty_share existed sampled no empty space; a hand-written
-    # config without the key gets today's default
+    # a run saved before render.empty_share existed sampled no empty space
     (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  n_coarse: 24\n")
     assert load_run_config(tmp_path).render.empty_share == RUN_KEY_ORIGINS[
         "render.empty_share"] == 0.0
-    assert load_config(tmp_path / "config.yaml").render.empty_share == Config().render.empty_share
+    # a key whose default has moved since: a run that lacks it gets its origin, a
+    # hand-written config today's default
+    monkeypatch.setitem(RUN_KEY_ORIGINS, "render.n_importance", 8)
+    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  n_coarse: 24\n")
+    assert load_run_config(tmp_path).render.n_importance == 8
+    assert load_config(tmp_path / "config.yaml").render.n_importance == \
+        Config().render.n_importance != 8
     # a run that saved the key keeps its value
-    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  empty_share: 0.4\n")
-    assert load_run_config(tmp_path).render.empty_share == 0.4
+    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  empty_share: 0.4\n"
+                                          "  n_importance: 12\n")
+    cfg = load_run_config(tmp_path)
+    assert cfg.render.empty_share == 0.4 and cfg.render.n_importance == 12
 
 
 def test_yaml_round_trip_and_bad_yaml(tmp_path):

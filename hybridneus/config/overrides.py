@@ -250,7 +250,9 @@ def save_config(cfg: Config, path: str | os.PathLike) -> None:
 #: Keys whose default moved after the key was added, with the value that does what the
 #: software did before the key existed. A run's saved config that lacks one of them was
 #: trained with that value, so :func:`load_config` with ``saved_run=True`` restores it
-#: instead of today's default. A key belongs here once its default moves.
+#: instead of today's default. A key belongs here once its default moves, and stays when it
+#: moves back (``render.empty_share`` was 0.25 at commits 5b412bf to 3b825d3, runs of which
+#: saved it).
 RUN_KEY_ORIGINS: dict[str, Any] = {"render.empty_share": 0.0}
 
 

@@ -71,7 +71,7 @@ class RenderConfig:
     occupancy_every: int = 16  # steps between occupancy refreshes
     occupancy_band: float = 3.0  # cells within band / inv_s (+ half a cell diagonal) are kept
     occupancy_march: int = 128  # look-ups per ray when placing samples in occupied space
-    empty_share: float = 0.25  # share of coarse samples spread over the whole ray, occupied or not
+    empty_share: float = 0.0  # share of coarse samples spread over the whole ray, occupied or not
     empty_share_until: float = 1.0  # training fraction after which that share fades out (1: never)
     crop_softness: float = 0.01  # width of the soft crop-cylinder edge (world units)
     cos_anneal_at: float = 0.0  # fraction of training over which NeuS's cos term anneals
