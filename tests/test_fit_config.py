@@ -150,7 +150,6 @@ def test_a_saved_run_keeps_what_it_was_trained_with(tmp_path, monkeypatch):
     # a key whose default has moved since: a run that lacks it gets its origin, a
     # hand-written config today's default
     monkeypatch.setitem(RUN_KEY_ORIGINS, "render.n_importance", 8)
-    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  n_coarse: 24\n")
     assert load_run_config(tmp_path).render.n_importance == 8
     assert load_config(tmp_path / "config.yaml").render.n_importance == \
         Config().render.n_importance != 8
