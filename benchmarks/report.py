@@ -451,7 +451,8 @@ def poses_section(rows: list[dict]) -> list[str]:
            "truth: mean (max) rotation in degrees and camera-centre shift in % of the "
            "distance; errors drawn every N views and interpolated between say `drift N`, and "
            "the refined fits' extra settings are listed. Step-time ratios are whole-fit means "
-           "(corrections learn in the second half). Targets: refined / exact Chamfer at most "
+           "(corrections learn in the second half); lines run beside other work "
+           "(`--shared-machine`) leave them out (-). Targets: refined / exact Chamfer at most "
            "1.2; on exact poses, refinement at most 1.05 of the Chamfer and 1.15 of the step "
            "time.", "",
            "| scene | views | errors (deg, share, views) | refinement | steps | CD exact | "
@@ -469,7 +470,7 @@ def poses_section(rows: list[dict]) -> list[str]:
                 f"{p['centre_pct_mean']:.2f} ({p['centre_pct_max']:.2f}) %"
                 for p in (r["poses_given"], r["poses_refined"])]
         on_exact = r.get("exact_refined_ratio")
-        step_exact = r.get("exact_step_time_ratio")
+        step_given, step_exact = r.get("step_time_ratio"), r.get("exact_step_time_ratio")
         out.append(f"| {r['scene']} | {r['views']} {r['size']} | {n['rotation_deg']:g}, "
                    f"{n['translation']:g}, {n['clock_offset_views']:g}{drift} | {sets} | "
                    f"{r['iters']} | "
@@ -477,7 +478,7 @@ def poses_section(rows: list[dict]) -> list[str]:
                    f"{_f(r['chamfer_refined'])} | {r['given_ratio']:.3f} | "
                    f"{r['refined_ratio']:.3f} | "
                    f"{'-' if on_exact is None else f'{on_exact:.3f}'} | {pose[0]} | "
-                   f"{pose[1]} | {r['step_time_ratio']:.2f} | "
+                   f"{pose[1]} | {'-' if step_given is None else f'{step_given:.2f}'} | "
                    f"{'-' if step_exact is None else f'{step_exact:.2f}'} | {r['commit']} | "
                    f"{_cpu(r)} | {r['date'][:10]} |")
     return out + _command_lines(rows)

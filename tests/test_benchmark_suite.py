@@ -715,3 +715,18 @@ def test_track_smoothing_is_scored_per_window_against_the_true_path(tmp_path):
 
     table = report.track_section(list(lines.values()))
     assert any(f"| -1 | {chosen['chosen'][0]}, {chosen['chosen'][1]} |" in row for row in table)
+
+
+def test_pose_lines_run_beside_other_work_show_no_step_time():
+    """bench_poses --shared-machine leaves the step-time ratios out; the table says '-'."""
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    results = SUITE.parent / "results" / "poses.jsonl"
+    alone = json.loads(results.read_text().splitlines()[-1])
+    shared = dict(alone, alone=False, step_time_ratio=None, exact_step_time_ratio=None)
+    rows = [row for row in report.poses_section([alone, shared]) if row.startswith("| ")]
+    cells = [[c.strip() for c in row.split("|")] for row in rows[-2:]]
+    column = rows[0].split("|").index(" step time refined / given ")
+    assert cells[0][column] == f"{alone['step_time_ratio']:.2f}"
+    assert cells[1][column] == "-" and cells[1][column + 1] == "-"
