@@ -32,30 +32,18 @@ from pathlib import Path
 import common
 import numpy as np
 import yaml
-from bench_roundtrip import add_fit_arguments, fit, score
+from bench_roundtrip import add_fit_arguments, fit, score, simulated_variant
 
 
 def noisy_dataset(args) -> Path:
     """The scene simulated with capture errors (cached beside the suite's datasets)."""
-    import run_suite
+    from hybridneus.simulate import CaptureErrors
 
-    from hybridneus.simulate import CaptureErrors, SimulationConfig, simulate_dataset
-
-    tag = (f"{args.scene.replace(':', '-')}-{args.views}v-{args.width}x{args.height}-"
-           f"pose{args.rotation:g}-{args.translation:g}-{args.clock:g}-s{args.noise_seed}"
-           + (f"-drift{args.drift:g}" if args.drift else ""))
-    folder = args.cache / tag
-    if not (folder / "scene.json").is_file():
-        source, extra = run_suite.simulation_source(args.scene,
-                                                    run_suite.find_assets(args.assets))
-        cfg = SimulationConfig(
-            n_views=args.views, width=args.width, height=args.height, val_views=0,
-            test_views=8, capture=CaptureErrors(args.rotation, args.translation, args.clock,
-                                                args.noise_seed, smooth_views=args.drift),
-            **extra)
-        print(f"[poses] simulating {folder}", file=sys.stderr, flush=True)
-        simulate_dataset(source, folder, cfg)
-    return folder
+    suffix = (f"pose{args.rotation:g}-{args.translation:g}-{args.clock:g}-s{args.noise_seed}"
+              + (f"-drift{args.drift:g}" if args.drift else ""))
+    capture = CaptureErrors(args.rotation, args.translation, args.clock, args.noise_seed,
+                            smooth_views=args.drift)
+    return simulated_variant(args, suffix, "poses", capture=capture)
 
 
 def exact_copy(noisy: Path) -> Path:

@@ -63,6 +63,26 @@ def datasets(args) -> tuple[Path, Path]:
     return colour, mono
 
 
+def simulated_variant(args, suffix: str, bench: str, **settings) -> Path:
+    """The scene at ``args.views`` views and ``args.width`` x ``args.height``, simulated once
+    with extra ``SimulationConfig`` settings (a capture's pose errors, unequal thresholds) and
+    cached beside the suite's datasets as ``<scene>-<views>v-<width>x<height>-<suffix>``."""
+    import run_suite
+
+    from hybridneus.simulate import SimulationConfig, simulate_dataset
+
+    folder = args.cache / (f"{args.scene.replace(':', '-')}-{args.views}v-"
+                           f"{args.width}x{args.height}-{suffix}")
+    if not (folder / "scene.json").is_file():
+        source, extra = run_suite.simulation_source(args.scene,
+                                                    run_suite.find_assets(args.assets))
+        cfg = SimulationConfig(n_views=args.views, width=args.width, height=args.height,
+                               val_views=0, test_views=8, **settings, **extra)
+        print(f"[{bench}] simulating {folder}", file=sys.stderr, flush=True)
+        simulate_dataset(source, folder, cfg)
+    return folder
+
+
 def write_recording(dataset: Path, out: Path) -> dict:
     """The dataset's train split as an HDF5 event file, a TUM track and a calibration."""
     import h5py

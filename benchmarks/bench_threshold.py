@@ -33,30 +33,17 @@ from pathlib import Path
 
 import common
 import yaml
-from bench_roundtrip import add_fit_arguments, fit, score
+from bench_roundtrip import add_fit_arguments, fit, score, simulated_variant
 
 
 def simulated(args) -> Path:
     """The scene with unequal thresholds (cached beside the suite's datasets)."""
-    import run_suite
-
-    from hybridneus.simulate import SimulationConfig, simulate_dataset
     from hybridneus.simulate.events import EventModel
 
-    tag = (f"{args.scene.replace(':', '-')}-{args.views}v-{args.width}x{args.height}-"
-           f"on{args.on:g}-off{args.off:g}")
-    folder = args.cache / tag
-    if not (folder / "scene.json").is_file():
-        source, extra = run_suite.simulation_source(args.scene,
-                                                    run_suite.find_assets(args.assets))
-        c = 0.5 * (args.on + args.off)
-        cfg = SimulationConfig(
-            n_views=args.views, width=args.width, height=args.height, val_views=0,
-            test_views=8, events=EventModel(threshold=c, polarity_offset=(args.on - c) / c),
-            **extra)
-        print(f"[threshold] simulating {folder}", file=sys.stderr, flush=True)
-        simulate_dataset(source, folder, cfg)
-    return folder
+    c = 0.5 * (args.on + args.off)
+    events = EventModel(threshold=c, polarity_offset=(args.on - c) / c)
+    return simulated_variant(args, f"on{args.on:g}-off{args.off:g}", "threshold",
+                             events=events)
 
 
 def unstated_copy(folder: Path) -> Path:

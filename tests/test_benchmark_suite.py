@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
 import json
 import shutil
@@ -730,3 +731,22 @@ def test_pose_lines_run_beside_other_work_show_no_step_time():
     column = rows[0].split("|").index(" step time refined / given ")
     assert cells[0][column] == f"{alone['step_time_ratio']:.2f}"
     assert cells[1][column] == "-" and cells[1][column + 1] == "-"
+
+
+def test_a_simulated_variant_is_named_by_its_settings_and_made_once(tmp_path):
+    """bench_poses and bench_threshold simulate their scenes through one cached helper."""
+    sys.path.insert(0, str(SUITE.parent))
+    import bench_poses
+
+    width, height = TINY_SIZE
+    args = argparse.Namespace(scene="builtin:device", views=8, width=width, height=height,
+                              rotation=0.5, translation=0.01, clock=0.01, noise_seed=0,
+                              drift=0.0, cache=tmp_path, assets=tmp_path / "no-assets")
+    folder = bench_poses.noisy_dataset(args)
+    assert folder == tmp_path / f"builtin-device-8v-{width}x{height}-pose0.5-0.01-0.01-s0"
+    truth = np.stack([np.loadtxt(p) for p in sorted((folder / "train/pose_true").iterdir())])
+    given = np.stack([np.loadtxt(p) for p in sorted((folder / "train/pose").iterdir())])
+    assert truth.shape == given.shape and not np.allclose(truth, given)  # errors went in
+    stamp = (folder / "scene.json").stat().st_mtime_ns
+    assert bench_poses.noisy_dataset(args) == folder
+    assert (folder / "scene.json").stat().st_mtime_ns == stamp  # the cached copy is kept
