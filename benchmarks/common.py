@@ -120,6 +120,11 @@ def meshed_over_crop(line: dict[str, Any]) -> bool:
     return line.get("volume") == CROP_VOLUME
 
 
+def budget_label(line: dict[str, Any]) -> str:
+    """A suite line's budget as tables and captions write it: ``15 min`` or ``2000 steps``."""
+    return f"{line['minutes']:g} min" if line.get("minutes") else f"{line.get('iters')} steps"
+
+
 #: The suite command a fit was made for, handed to its child process and kept in fit.json
 #: (a line scored later, by another command, names both).
 FIT_COMMAND = "HYBRIDNEUS_FIT_COMMAND"

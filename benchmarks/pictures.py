@@ -54,7 +54,7 @@ def budget_text(line: dict) -> str:
     """A suite line's budget as captions write it: ``15 min`` or ``2000 steps``, and where
     the mesh spans the crop's box (``"volume": "crop"``), ``2000 steps, res 300 over the
     crop``."""
-    budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line['iters']} steps"
+    budget = common.budget_label(line)
     if common.meshed_over_crop(line):
         budget += f", res {line.get('res', 300)} over the crop"
     return budget

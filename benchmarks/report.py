@@ -40,7 +40,7 @@ def _budget(line: dict) -> str:
     """The budget, and the meshed volume where it is the crop's box: lines meshed over the
     whole cube (older ones) and over the crop score the same fit differently, so no table
     pairs or averages the two."""
-    budget = f"{line['minutes']:g} min" if line.get("minutes") else f"{line.get('iters')} steps"
+    budget = common.budget_label(line)
     return f"{budget}, meshed over the crop" if common.meshed_over_crop(line) else budget
 
 
