@@ -724,12 +724,13 @@ def test_pose_lines_run_beside_other_work_show_no_step_time():
     import report
 
     results = SUITE.parent / "results" / "poses.jsonl"
-    alone = json.loads(results.read_text().splitlines()[-1])
-    shared = dict(alone, alone=False, step_time_ratio=None, exact_step_time_ratio=None)
+    line = json.loads(results.read_text().splitlines()[-1])
+    alone = dict(line, alone=True, step_time_ratio=1.02, exact_step_time_ratio=0.88)
+    shared = dict(line, alone=False, step_time_ratio=None, exact_step_time_ratio=None)
     rows = [row for row in report.poses_section([alone, shared]) if row.startswith("| ")]
     cells = [[c.strip() for c in row.split("|")] for row in rows[-2:]]
     column = rows[0].split("|").index(" step time refined / given ")
-    assert cells[0][column] == f"{alone['step_time_ratio']:.2f}"
+    assert cells[0][column] == "1.02" and cells[0][column + 1] == "0.88"
     assert cells[1][column] == "-" and cells[1][column + 1] == "-"
 
 
