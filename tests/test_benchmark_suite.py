@@ -745,8 +745,8 @@ def test_a_simulated_variant_is_named_by_its_settings_and_made_once(tmp_path):
                               drift=0.0, cache=tmp_path, assets=tmp_path / "no-assets")
     folder = bench_poses.noisy_dataset(args)
     assert folder == tmp_path / f"builtin-device-8v-{width}x{height}-pose0.5-0.01-0.01-s0"
-    truth = np.stack([np.loadtxt(p) for p in sorted((folder / "train/pose_true").iterdir())])
-    given = np.stack([np.loadtxt(p) for p in sorted((folder / "train/pose").iterdir())])
+    truth = bench_poses._poses(folder / "train" / "pose_true")
+    given = bench_poses._poses(folder / "train" / "pose")
     assert truth.shape == given.shape and not np.allclose(truth, given)  # errors went in
     stamp = (folder / "scene.json").stat().st_mtime_ns
     assert bench_poses.noisy_dataset(args) == folder
