@@ -577,6 +577,7 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
                          ("floor", "Chamfer floors: ideal meshes that lack an unseen part, and the "
                           "ground truth meshed"),
                          ("rare_fill", "Meshing that also fills space few views see"),
+                         ("probe", "Budget probe: the mean step it predicts, repeated"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
                          ("data", "Data"), ("simulate", "Simulation"),

@@ -52,6 +52,7 @@ def fit_run(job, started: float) -> Path:
         with atomic_path(path) as tmp:
             torch.save({"model": trainer.field.state_dict(), "elapsed": trainer.elapsed,
                         "step": trainer.step, "total_steps": trainer.total_steps,
+                        "knots": [[int(k), float(q)] for k, q in trainer.timeline.knots],
                         "scene": dict(trainer.scene)}, tmp)
 
     def snapshot(trainer, logs) -> None:
@@ -160,11 +161,12 @@ def load_snapshot(cfg, path: Path):
     import torch
 
     from hybridneus.training.runs import build_field
+    from hybridneus.training.state import position
 
     snap = torch.load(path, map_location="cpu", weights_only=True)
     f = build_field(cfg, snap["scene"])
     f.load_state_dict(snap["model"])
-    f.update_step(int(snap["step"]), int(snap["total_steps"]))
+    f.update_step(position(snap), int(snap["total_steps"]))
     return f.eval(), snap
 
 

@@ -199,9 +199,8 @@ def _fix_budget(trainer, logger, end: float) -> None:
     trainer.record.steps_from = how
     trainer.deadline = end - save - 0.5
     if t.replan_at:
-        opened = trainer.cfg.grid.opened_at
         trainer.plan = BudgetPlan(costs, trainer.deadline, tuple(t.replan_at),
-                                  lengthen_after=opened if t.replan_lengthen else None)
+                                  lengthen=t.replan_lengthen)
 
 
 def _same_dataset(run_dir: Path, recorded: str, given: Any) -> None:

@@ -751,3 +751,18 @@ def test_a_simulated_variant_is_named_by_its_settings_and_made_once(tmp_path):
     stamp = (folder / "scene.json").stat().st_mtime_ns
     assert bench_poses.noisy_dataset(args) == folder
     assert (folder / "scene.json").stat().st_mtime_ns == stamp  # the cached copy is kept
+
+
+def test_the_probe_is_repeated_per_count_of_timed_steps(tiny_scene, tmp_path):
+    out = tmp_path / "probe.jsonl"
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_probe.py")),
+                           str(tiny_scene / "device"), "--repeats", "2", "--steps", "1", "5",
+                           "--threads", "1", "--allow-dirty", "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [line["steps_per_point"] for line in lines] == [1, 5]
+    assert [line["default"] for line in lines] == [False, True]
+    for line in lines:
+        assert line["repeats"] == 2 and 0 < line["min_ms"] <= line["mean_step_ms"]
+        assert line["mean_step_ms"] <= line["max_ms"] and line["variation"] >= 0

@@ -1,9 +1,10 @@
 """A --minutes budget becomes a step count before the first step, recorded and repeatable,
-and is shortened during the fit when the steps run slower than the probe measured."""
+and is re-planned during the fit when the steps run at another pace than the probe measured."""
 
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -12,6 +13,7 @@ from fitting import params, tiny
 from hybridneus.api import fit, prepare
 from hybridneus.training.budget import BudgetPlan, StepCosts, mean_step_seconds, step_seconds
 from hybridneus.training.scene import SceneRecord
+from hybridneus.training.schedules import Timeline
 
 
 def test_the_mean_step_interpolates_the_probe_points():
@@ -39,39 +41,54 @@ class _Clock:
         return self.now
 
 
-def _budgeted_run(pace, at: tuple[float, ...], lengthen_after: float | None = None
-                  ) -> tuple[object, bool, BudgetPlan]:
+class _Trainer:
+    """What a :class:`BudgetPlan` reads and resizes of a trainer."""
+
+    def __init__(self, total: int) -> None:
+        self.step = 0
+        self.timeline = Timeline(total)
+        self.record = SimpleNamespace(steps=total, steps_from="budget")
+
+    @property
+    def total_steps(self) -> int:
+        return self.timeline.total
+
+    def progress(self, step: int) -> float:
+        return self.timeline.progress(step)
+
+
+def _budgeted_run(pace, at: tuple[float, ...], lengthen: bool = False
+                  ) -> tuple[_Trainer, bool, BudgetPlan]:
     """Steps that each take ``pace`` times what the probe predicted for them (a number, or a
     function of the step's index), on a planned 1000-step schedule whose probe said it fills
     100 s exactly; runs to the schedule's end or the deadline. Returns (trainer, whether it
-    ended by the deadline, plan)."""
-    from types import SimpleNamespace
-
+    ended by the deadline, plan); the plan's ``jumps`` are the changes of progress at the
+    re-planned steps, its ``used`` the share of the budget spent."""
     costs = StepCosts(0.05, 0.12, 0.1, 0.2, 0.3, 16)
     total = 1000
     end = costs.mean(0.0) * total
-    trainer = SimpleNamespace(step=0, total_steps=total,
-                              record=SimpleNamespace(steps=total, steps_from="budget"))
+    trainer = _Trainer(total)
     clock = _Clock()
-    plan = BudgetPlan(costs, end, at, lengthen_after=lengthen_after, clock=clock)
+    plan = BudgetPlan(costs, end, at, lengthen=lengthen, clock=clock)
     plan.start(0)
-    plan.progress_after = []  # the progress of each re-plan's step in its new schedule
+    plan.jumps = []
     while trainer.step < trainer.total_steps and clock.now < end:
-        p = trainer.step / trainer.total_steps
+        p, p_next = trainer.progress(trainer.step), trainer.progress(trainer.step + 1)
         factor = pace(trainer.step) if callable(pace) else pace
-        clock.now += factor * costs.mean(p, p + 1.0 / trainer.total_steps)
+        clock.now += factor * costs.mean(p, p_next)
         trainer.step += 1
-        before = trainer.total_steps
+        before, p_before = trainer.total_steps, trainer.progress(trainer.step)
         plan.after_step(trainer)
         if trainer.total_steps != before:
-            plan.progress_after.append(trainer.step / trainer.total_steps)
+            plan.jumps.append(trainer.progress(trainer.step) - p_before)
     plan.used = clock.now / end
     return trainer, clock.now <= end, plan
 
 
 def test_a_plan_shortens_an_overrunning_schedule_so_that_it_ends_in_time():
     """At 1.3x the probe's step time a fixed schedule stops at its deadline near 77%; the plan
-    shortens it once it has measured the pace, and the fit reaches the schedule's end in time."""
+    shortens it once it has measured the pace, and the fit reaches the schedule's end in time,
+    its progress never jumping."""
     fixed, _, _ = _budgeted_run(1.3, at=())
     assert fixed.step < 0.8 * fixed.total_steps
     trainer, in_time, plan = _budgeted_run(1.3, at=(0.05, 0.15, 0.3, 0.5, 0.7))
@@ -79,43 +96,60 @@ def test_a_plan_shortens_an_overrunning_schedule_so_that_it_ends_in_time():
     assert 700 <= trainer.total_steps < 1000 and trainer.record.steps == trainer.total_steps
     assert plan.replans and "re-planned at step" in trainer.record.steps_from
     assert "1.30x the probe's time" in plan.replans[0]
+    assert plan.jumps and max(abs(j) for j in plan.jumps) < 1e-12
+    assert trainer.progress(trainer.step) == pytest.approx(1.0) and plan.used > 0.95
 
 
-def test_a_plan_that_shortens_past_its_next_point_does_not_replan_on_one_step():
-    """A machine three times slower from step 300 on: at 50% (step 486 of 972) the plan
-    shortens the schedule to 521 steps, which puts the step past the 70% point too.
-    Re-planning at the next step would time that step alone; that one step being slow (a
-    checkpoint, say) would cut the schedule again and leave budget unused."""
-    def pace(index: int) -> float:  # index 486 is step 487, the one after the re-plan
+def test_a_plan_follows_a_machine_that_slows_part_way():
+    """A machine three times slower from step 300 on, and one step after that slower still:
+    the plan shortens at the points after the slow-down, the fit ends in time with most of
+    its budget used, and its progress rises without a jump to 1 at the end."""
+    def pace(index: int) -> float:
         return 6.0 if index == 486 else 3.0 if index >= 300 else 1.0
 
     trainer, in_time, plan = _budgeted_run(pace, at=(0.05, 0.15, 0.3, 0.5, 0.7))
-    assert in_time and trainer.step == trainer.total_steps == 521
-    assert [line.split(":")[0] for line in plan.replans] == [
-        "re-planned at step 50", "re-planned at step 486"]
-    assert plan.used > 0.95
+    assert in_time and trainer.step == trainer.total_steps < 700
+    assert len(plan.replans) >= 2 and plan.used > 0.9
+    assert max(abs(j) for j in plan.jumps) < 1e-12
+    steps = range(trainer.total_steps + 1)
+    progress = [trainer.progress(s) for s in steps]
+    assert all(b > a for a, b in zip(progress, progress[1:], strict=False))
+    assert progress[0] == 0.0 and progress[-1] == pytest.approx(1.0)
 
 
-def test_a_plan_never_lengthens_a_schedule():
+def test_a_plan_never_lengthens_a_schedule_unless_told():
     trainer, _, plan = _budgeted_run(0.7, at=(0.05, 0.15, 0.3, 0.5, 0.7))
     assert trainer.total_steps == 1000 and not plan.replans
     assert plan.used < 0.75  # a quarter of the budget left unused
 
 
-def test_a_plan_told_to_lengthen_does_so_only_past_the_open_levels_and_ends_in_time():
-    """At 0.7x the probe's step time, train.replan_lengthen lets the plan use the time it
-    gains, but only at points where the step stays past 40% (all levels open) of the longer
-    schedule; the fit still ends in time."""
-    trainer, in_time, plan = _budgeted_run(0.7, at=(0.05, 0.15, 0.3, 0.5, 0.7),
-                                           lengthen_after=0.4)
-    assert in_time and trainer.step == trainer.total_steps > 1100
-    assert plan.replans and all(p >= 0.4 for p in plan.progress_after)
-    assert "re-planned at step 5" in plan.replans[0]  # not at 5, 15 or 30%: levels not open
-    assert plan.used > 0.85
-    # lengthening is bounded by the levels' point, so 0.0 would allow any length; a slow
-    # fit is shortened as before
-    slow, in_time, _ = _budgeted_run(1.3, at=(0.05, 0.15, 0.3, 0.5, 0.7), lengthen_after=0.4)
+def test_a_plan_told_to_lengthen_uses_the_time_it_gains_and_ends_in_time():
+    """At 0.7x the probe's step time, train.replan_lengthen lets the plan lengthen the
+    schedule from its first point on, without moving the progress reached; the fit ends in
+    time with (nearly) all of its budget used. A slow fit is shortened as before."""
+    trainer, in_time, plan = _budgeted_run(0.7, at=(0.05, 0.15, 0.3, 0.5, 0.7), lengthen=True)
+    assert in_time and trainer.step == trainer.total_steps > 1300
+    assert plan.replans[0].startswith("re-planned at step 50:")
+    assert max(abs(j) for j in plan.jumps) < 1e-12 and plan.used > 0.95
+    slow, in_time, _ = _budgeted_run(1.3, at=(0.05, 0.15, 0.3, 0.5, 0.7), lengthen=True)
     assert in_time and slow.step == slow.total_steps < 1000
+
+
+def test_a_replanned_schedule_is_saved_and_resumed_with_its_progress(scene):
+    """A checkpoint of a trainer whose schedule was resized holds the knots: the trainer it
+    is loaded into has the same progress at every step, and so the same level schedule."""
+    cfg = tiny("train.iters=8", "train.seed=3")
+    trainer, _ = prepare(scene, cfg, device="cpu")
+    for _ in range(3):
+        trainer.train_step()
+    trainer.timeline.resize(3, 20)
+    state = trainer.state_dict()
+    other, _ = prepare(scene, cfg, device="cpu")
+    other.load_state_dict(state)
+    assert other.total_steps == 20 and other.step == 3
+    for s in (0, 2, 3, 7, 20):
+        assert other.progress(s) == trainer.progress(s)
+    assert other.progress(3) == pytest.approx(3 / 8) and other.progress(20) == pytest.approx(1)
 
 
 def test_a_budgeted_fit_slower_than_its_probe_is_replanned_and_finishes(scene, tmp_path,

@@ -236,3 +236,21 @@ def test_a_view_lost_from_one_folder_is_named(tmp_path, sub, message):
     next((tmp_path / "s" / "train" / sub).glob("r_00002.*")).unlink()
     with pytest.raises(DatasetError, match=f"view counts differ .*: {message}"):
         load_dataset(tmp_path / "s", overrides=SIZE)
+
+
+def test_a_checkpoint_with_damaged_schedule_knots_is_refused_by_name(tiny_scene, tmp_path,
+                                                                      run_cli):
+    import shutil
+
+    import torch
+
+    run = next(p for p in (tiny_scene / "runs").iterdir() if p.is_dir() and not p.is_symlink())
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    path = copy / "checkpoints" / "last.pt"
+    state = torch.load(path, weights_only=True)
+    state["knots"] = [[0, 0.0], [5, "half"]]
+    torch.save(state, path)
+    (copy / "checkpoints" / "previous.pt").unlink()
+    code, _, err = run_cli("mesh", str(copy), "--res", "16", "--out", str(tmp_path / "m.ply"))
+    assert code == 2 and "last.pt: checkpoint's schedule knots" in err and err.count("\n") == 1

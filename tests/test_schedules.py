@@ -75,3 +75,32 @@ def test_the_empty_share_holds_then_fades_out_over_a_tenth():
         [0.25, 0.25, 0.125, 0.0, 0.0])
     assert S.empty_share(0.99, 0.25, 1.0) == 0.25  # until 1: throughout
     assert S.empty_share(0.0, 0.25, 0.0) == 0.25 and S.empty_share(0.1, 0.25, 0.0) == 0.0
+
+
+def test_a_timeline_never_resized_is_step_over_total():
+    line = S.Timeline(7)
+    for step in range(9):
+        assert line.progress(step) == S.progress(step, 7)
+        assert line.position(step) == float(step)
+
+
+def test_a_resized_timeline_keeps_the_progress_reached_and_ends_at_one():
+    """Shortened at step 30 of 100, then lengthened at step 50 of the new 60: the progress is
+    continuous at both knots, linear between them, and 1 at the final length; the steps
+    before a resize keep the progress they had."""
+    line = S.Timeline(100)
+    line.resize(30, 60)
+    assert line.progress(30) == pytest.approx(0.3)
+    assert line.progress(45) == pytest.approx(0.3 + 15 * 0.7 / 30)
+    at_50 = line.progress(50)
+    line.resize(50, 150)
+    assert line.progress(50) == pytest.approx(at_50)
+    assert line.progress(150) == pytest.approx(1.0)
+    assert line.progress(100) == pytest.approx(at_50 + 50 * (1 - at_50) / 100)
+    for step in (0, 10, 29, 30, 40):
+        assert line.progress(step) == pytest.approx(min(step, 30) / 100 + max(step - 30, 0)
+                                                    * 0.7 / 30)
+    values = [line.progress(s) for s in range(151)]
+    assert all(b > a for a, b in zip(values, values[1:], strict=False))
+    assert line.position(150) == pytest.approx(150.0)
+    assert line.position(50) == pytest.approx(at_50 * 150)

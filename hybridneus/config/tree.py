@@ -106,7 +106,7 @@ class TrainConfig:
     iters: int = 2000  # steps, unless train.minutes sets a budget
     minutes: float = 0.0  # wall-clock budget of the whole fit (0: none); turned into steps
     replan_at: list[float] = field(default_factory=lambda: list(REPLAN_AT))  # budget re-plans
-    replan_lengthen: bool = False  # re-plans may also lengthen, once every grid level is open
+    replan_lengthen: bool = False  # re-plans may also lengthen a schedule that would end early
     n_rays: int = 0  # pixels per step, each at both window ends (0: 256 on CPU, 1024 on CUDA)
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)

@@ -186,8 +186,9 @@ class HybridField(nn.Module):
 
     # ------------------------------------------------------------------ schedules
 
-    def update_step(self, step: int, total_steps: int) -> None:
-        """Apply the coarse-to-fine schedule for ``step`` of ``total_steps``.
+    def update_step(self, step: float, total_steps: int) -> None:
+        """Apply the coarse-to-fine schedule for ``step`` of ``total_steps`` (a fractional
+        step: a re-planned schedule's position, :meth:`.Timeline.position`).
 
         Grid kinds open levels linearly from ``grid.start_levels`` to all at
         ``grid.opened_at * total_steps``; the frequency kind anneals its bands over as many

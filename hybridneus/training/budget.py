@@ -1,5 +1,5 @@
 """A wall-clock budget (``--minutes``) turned into a number of steps before training, and
-shortened during it when the steps run slower than measured.
+re-planned during it when the steps run at another pace than measured.
 
 The schedules are fractions of training, so a fit must know its length before its first
 step. A step's cost depends on how far training is: a two-core CPU took 53 ms per step with
@@ -13,17 +13,20 @@ repeats the run's schedule on any machine.
 A fresh field is cheaper to step than a trained one (on a 2-core Intel Xeon, late steps of
 trained fields took 2 to 2.5 times the probe's time for the same number of samples, most of
 it on subnormal floats, which the field and renderer now hold at zero: docs/training.md),
-and a machine's speed drifts, so the probe alone overestimated a 15-minute fit's steps by
-5-7% on an AMD EPYC and 28-39% on that Xeon, and such fits stopped at their deadline with
-72-78% of their schedule done: the learning rate never decayed and the late priors never
-faded. :class:`BudgetPlan` therefore re-plans at a few points of training
-(``train.replan_at``): it compares the wall-clock time the last stretch of steps took with
-what the probe predicted for them and, if the rest would overrun, shortens the schedule to
-what the time left allows at the measured pace. Unless ``train.replan_lengthen`` is set
-(:class:`BudgetPlan`'s ``lengthen_after``), it only shortens. Each re-plan is logged and
-recorded in ``scene.yaml``; ``--iters`` with the final count follows the re-planned
-schedule's length but not its jumps in progress, so it repeats such a run closely rather
-than exactly.
+and a machine's speed drifts: on a 2-core AMD EPYC the probe's mean step varied by 11%
+(coefficient of variation) between probes a few seconds apart, with 5, 10 or 20 timed steps
+per point alike, so more probing does not help. Fits stopped at their deadline with 72-78%
+of their schedule done when the probe was too fast (the learning rate never decayed, the
+late priors never faded) and ended with up to 15% of the budget unused when it was too slow.
+:class:`BudgetPlan` therefore re-plans at a few points of training (``train.replan_at``): it
+compares the wall-clock time the last stretch of steps took with what the probe predicted
+for them and, if the rest would overrun, shortens the schedule to what the time left allows
+at the measured pace; with ``train.replan_lengthen`` it also lengthens a schedule that would
+end early. A re-plan changes the rate at which progress grows from that step on, not the
+progress reached (:class:`~hybridneus.training.schedules.Timeline`), so no schedule jumps.
+Each re-plan is logged and recorded in ``scene.yaml``; ``--iters`` with the final count
+follows the re-planned schedule's length but not its change of rate, so it repeats such a
+run closely rather than exactly.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+from hybridneus.training.schedules import Timeline
 
 #: Steps timed per probe point, after the warm-up steps.
 PROBE_STEPS = 5
@@ -50,7 +55,7 @@ _NOMINAL = 100_000
 def _timed_steps(trainer, p: float) -> float:
     """Median seconds of a training step at progress ``p`` (no occupancy refresh)."""
     every = max(trainer.cfg.render.occupancy_every, 1)
-    trainer.total_steps = _NOMINAL
+    trainer.timeline = Timeline(_NOMINAL)
     trainer.step = int(p * _NOMINAL) // every * every + 1
     times = []
     for i in range(PROBE_WARMUP + PROBE_STEPS):
@@ -138,20 +143,16 @@ class StepCosts:
 
 @dataclass
 class BudgetPlan:
-    """Shortens a budgeted fit's schedule when its steps run slower than the probe said (and,
-    with ``lengthen_after``, lengthens it when they run faster).
+    """Re-plans a budgeted fit's length when its steps run slower than the probe said (and,
+    with ``lengthen``, when they run faster).
 
-    Call :meth:`after_step` after every step; at each progress point of ``at`` (fractions of
-    the schedule) it measures the seconds the steps since the previous point took against
-    the ``costs`` predicted for them and, when the remaining steps at that ratio would end
-    after ``end`` (a ``clock()`` value), sets the trainer's ``total_steps`` (and its scene
-    record's ``steps``) to what fits.
-
-    A longer schedule moves the progress of the current step back. ``lengthen_after`` (a
-    fraction, or None: never lengthen) allows it only where the step stays past that fraction
-    of the longer schedule: given the point where coarse-to-fine has opened every grid level,
-    no level closes again; what moves back is the learning rate's decay and the fading priors,
-    by the step's share of the added length.
+    Call :meth:`after_step` after every step; at each progress point of ``at`` it measures
+    the seconds the steps since the previous point took against the ``costs`` predicted for
+    them and, when the remaining steps at that pace would end after ``end`` (a ``clock()``
+    value), or with ``lengthen`` well before it, resizes the trainer's
+    :class:`~hybridneus.training.schedules.Timeline` (and its scene record's ``steps``) to
+    what fits. The progress reached stays where it is: every schedule goes on from there at
+    the new rate, without a jump.
 
     Attributes:
         replans: one line per re-plan that changed the schedule.
@@ -160,55 +161,43 @@ class BudgetPlan:
     costs: StepCosts
     end: float
     at: tuple[float, ...]
-    lengthen_after: float | None = None
+    lengthen: bool = False
     clock: Callable[[], float] = time.perf_counter
     replans: list[str] = field(default_factory=list)
-    _mark: tuple[int, float] | None = None
+    _mark: tuple[int, float, float] | None = None
     _next: int = 0
 
-    def start(self, step: int) -> None:
-        """Begin timing at ``step`` (the fit's first)."""
-        self._mark = (step, self.clock())
+    def start(self, step: int, p: float = 0.0) -> None:
+        """Begin timing at ``step`` (the fit's first, at progress ``p``)."""
+        self._mark = (step, self.clock(), p)
 
     def after_step(self, trainer) -> None:
         """Re-plan if ``trainer`` has just passed the next point of ``at``."""
         if self._mark is None:
             raise RuntimeError("BudgetPlan.start() was not called before the first step")
-        total = trainer.total_steps
-        p = trainer.step / total
+        p = trainer.progress(trainer.step)
         if self._next >= len(self.at) or p < self.at[self._next]:
             return
         while self._next < len(self.at) and p >= self.at[self._next]:
             self._next += 1
         now = self.clock()
-        step0, t0 = self._mark
-        self._mark = (trainer.step, now)
+        step0, t0, p0 = self._mark
+        self._mark = (trainer.step, now, p)
         done = trainer.step - step0
         if done <= 0:
             return
-        predicted = self.costs.mean(step0 / total, p) * done
+        predicted = self.costs.mean(p0, p) * done
         pace = (now - t0) / predicted if predicted > 0 else 1.0
         left = self.end - now
         rest = self.costs.mean(p) * pace * HEADROOM
+        total = trainer.total_steps
         fits = trainer.step + max(1, int(left / rest)) if left > 0 else trainer.step + 1
-        if fits > total:
-            if self.lengthen_after is None:
-                return
-            if self.lengthen_after > 0:
-                # the longest schedule whose progress at this step stays past lengthen_after
-                fits = min(fits, int(trainer.step / self.lengthen_after))
-            if fits <= total:
-                return
-        elif fits == total:
+        if fits == total or (fits > total and not self.lengthen):
             return
         line = (f"re-planned at step {trainer.step}: {total} -> {fits} steps (the last "
                 f"{done} took {pace:.2f}x the probe's time)")
-        trainer.total_steps = trainer.record.steps = fits
-        # A shorter schedule can put this step past the next points too; re-planning at the
-        # next step would time that one step alone (an occupancy refresh, a checkpoint, a
-        # hiccup), so those points are spent here.
-        while self._next < len(self.at) and trainer.step / fits >= self.at[self._next]:
-            self._next += 1
+        trainer.timeline.resize(trainer.step, fits)
+        trainer.record.steps = fits
         trainer.record.steps_from += f"; {line}"
         self.replans.append(line)
         logging.getLogger("hybridneus").info(line)

@@ -168,7 +168,20 @@ def _read_checkpoint(path: Path, map_location: Any) -> dict[str, Any]:
         what = ", ".join(missing) if missing else "scene (not a mapping)"
         raise RunError(f"{path}: checkpoint lacks {what} (written by another tool, or "
                        "damaged)")
+    knots = state.get("knots")
+    if knots is not None and not _knots_ok(knots):
+        raise RunError(f"{path}: checkpoint's schedule knots are not (step, progress) pairs "
+                       "starting at (0, 0) (written by another tool, or damaged)")
     return state
+
+
+def _knots_ok(knots: Any) -> bool:
+    try:
+        pairs = [(int(k), float(q)) for k, q in knots]
+    except (TypeError, ValueError):
+        return False
+    return bool(pairs) and pairs[0] == (0, 0.0) and all(
+        a[0] < b[0] and 0.0 <= b[1] <= 1.0 for a, b in zip(pairs, pairs[1:], strict=False))
 
 
 def load_run_config(run_dir: str | os.PathLike) -> Config:
@@ -224,6 +237,7 @@ def load_field(
         RunError: missing or unreadable run folder / checkpoint.
     """
     from hybridneus.device import resolve_device
+    from hybridneus.training.state import position
 
     run_dir = _resolve_run(run_dir)
     dev = resolve_device(device)
@@ -238,7 +252,7 @@ def load_field(
     except RuntimeError as exc:
         first = str(exc).splitlines()[0]
         raise RunError(f"{run_dir / CHECKPOINT}: does not match config.yaml ({first})") from None
-    field.update_step(int(state["step"]), int(state["total_steps"]))
+    field.update_step(position(state), int(state["total_steps"]))
     return field.to(dev).eval()
 
 

@@ -2,15 +2,63 @@
 
 ``p = step / total_steps``: the same config gives the same schedule on any machine, and a fit
 of a different length stretches it instead of cutting it. Lengths and onsets are fractions
-of training too.
+of training too. A budgeted fit whose length is re-planned part-way (:mod:`.budget`) keeps
+its progress where it was and changes only its rate from there on (:class:`Timeline`).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 
 def progress(step: int, total: int) -> float:
     """``step / total`` (0 for a schedule of no length)."""
     return step / total if total > 0 else 0.0
+
+
+@dataclass
+class Timeline:
+    """A fit's progress by step: ``step / total`` until :meth:`resize` changes the length;
+    from then on linear from the progress reached at the resized step to 1 at the new end.
+
+    Setting ``total`` directly changes the length without a knot (a resumed run given more
+    steps, or a budget fixed before the first step): at step 0 the two agree.
+
+    Attributes:
+        total: the schedule's length in steps.
+        knots: ``(step, progress)`` pairs, the first ``(0, 0.0)``; one more per resize.
+    """
+
+    total: int
+    knots: list[tuple[int, float]] = field(default_factory=lambda: [(0, 0.0)])
+
+    def progress(self, step: float) -> float:
+        """The progress at ``step`` (past the end it goes on rising at the last rate)."""
+        if len(self.knots) == 1:
+            return progress(step, self.total)  # exactly step / total, as before any resize
+        # between two knots the progress is where the schedule of that stretch put it
+        for (s0, p0), (s1, p1) in zip(self.knots, self.knots[1:], strict=False):
+            if step < s1:
+                return p0 + (step - s0) * (p1 - p0) / (s1 - s0)
+        s0, p0 = self.knots[-1]
+        if self.total <= s0:
+            return 1.0
+        return p0 + (step - s0) * (1.0 - p0) / (self.total - s0)
+
+    def position(self, step: int) -> float:
+        """``step`` on a schedule of ``total`` steps never resized, that has the same
+        progress: ``step`` itself before any resize (for the step-counted coarse-to-fine
+        schedule, :meth:`~hybridneus.model.field.HybridField.update_step`)."""
+        if len(self.knots) == 1:
+            return float(step)
+        return self.progress(step) * self.total
+
+    def resize(self, step: int, total: int) -> None:
+        """Make the schedule ``total`` steps long from ``step`` on, with its progress at
+        ``step`` unchanged."""
+        p = self.progress(step)
+        self.knots = [k for k in self.knots if k[0] < step] + [(int(step), float(p))]
+        self.total = int(total)
 
 
 def ramp(p: float, start: float, length: float) -> float:

@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from hybridneus.training.schedules import Timeline
+
 #: Checkpoint layout version (1: hybridneus 0.1, whose guard state sat under ``guard``).
 VERSION = 2
 
@@ -23,6 +25,8 @@ def trainer_state(trainer) -> dict[str, Any]:
         "version": VERSION,
         "step": trainer.step,
         "total_steps": trainer.total_steps,
+        # a re-planned budget's (step, progress) knots: the schedules resume where they were
+        "knots": [[int(k), float(q)] for k, q in trainer.timeline.knots],
         "elapsed": trainer.elapsed,
         "model": trainer.field.state_dict(),
         "occupancy": trainer.occupancy.occupied.clone(),
@@ -71,12 +75,25 @@ def load_trainer_state(trainer, state: dict[str, Any]) -> None:
         if state.get("pose_optimizer") is not None:
             trainer.pose_optimizer.load_state_dict(state["pose_optimizer"])
     trainer.step = int(state["step"])
-    trainer.total_steps = int(state["total_steps"])
+    trainer.timeline = timeline(state)
     trainer.elapsed = float(state.get("elapsed", 0.0))
     saved = state.get("priors", {})
     for prior in trainer.priors:
         prior.load_state_dict({**saved.get(prior.name, {}), "step": trainer.step})
-    trainer.field.update_step(trainer.step, trainer.total_steps)
+    trainer.field.update_step(trainer.timeline.position(trainer.step), trainer.total_steps)
+
+
+def timeline(state: dict[str, Any]) -> Timeline:
+    """The schedule of a saved state (a checkpoint from before re-plans kept their progress
+    has no knots: ``step / total_steps``)."""
+    knots = [(int(k), float(q)) for k, q in state.get("knots") or [(0, 0.0)]]
+    return Timeline(int(state["total_steps"]), knots)
+
+
+def position(state: dict[str, Any]) -> float:
+    """The saved step's position on its schedule, for
+    :meth:`~hybridneus.model.field.HybridField.update_step`."""
+    return timeline(state).position(int(state["step"]))
 
 
 def _scene(trainer) -> dict[str, Any]:

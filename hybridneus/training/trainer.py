@@ -73,11 +73,13 @@ class Trainer:
         field: the model being trained.
         priors: the enabled priors (:mod:`hybridneus.training.priors`).
         step: completed steps.
-        total_steps: the schedule's length.
+        total_steps: the schedule's length (:attr:`timeline`'s ``total``).
+        timeline: progress by step (:class:`~hybridneus.training.schedules.Timeline`); a
+            budget re-plan changes its length without moving the progress reached.
         deadline: a ``time.perf_counter()`` value by which :meth:`fit` stops (a wall-clock
             budget), or ``None``.
-        plan: a :class:`~hybridneus.training.budget.BudgetPlan` that may shorten the schedule
-            of a budgeted fit running slower than probed, or ``None``.
+        plan: a :class:`~hybridneus.training.budget.BudgetPlan` that may re-plan the length
+            of a budgeted fit running at another pace than probed, or ``None``.
         interrupted: set when :meth:`fit` stopped on KeyboardInterrupt.
         stopped_early: set when :meth:`fit` stopped at the deadline before the last step.
     """
@@ -153,12 +155,24 @@ class Trainer:
         self.priors = build_priors(cfg, self.field, self.split, self.aabb, self.device)
         self.objective = Objective(cfg.loss, self.priors, self.aabb)
         self.step = 0
-        self.total_steps = max(1, record.steps)
+        self.timeline = schedules.Timeline(max(1, record.steps))
         self.elapsed = 0.0
         self.deadline: float | None = None
         self.plan = None
         self.interrupted = self.stopped_early = False
         self.occupied_fraction = 1.0
+
+    @property
+    def total_steps(self) -> int:
+        return self.timeline.total
+
+    @total_steps.setter
+    def total_steps(self, total: int) -> None:
+        self.timeline.total = int(total)
+
+    def progress(self, step: int) -> float:
+        """The schedules' progress at ``step`` (:class:`.schedules.Timeline`)."""
+        return self.timeline.progress(step)
 
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to resume (:func:`hybridneus.training.state.trainer_state`)."""
@@ -175,7 +189,7 @@ class Trainer:
         into the scene's over ``estimate.eps_ease``. A small eps from the first step lets the
         largest event targets pull hard on dark colours before there is a surface to colour,
         and a 256-pixel xylophone fit lost its surface by step 100 that way."""
-        p = schedules.progress(self.step, self.total_steps)
+        p = self.progress(self.step)
         return schedules.eased(p, self.record.eps_start, self.scene["tonemap_eps"],
                                self.cfg.estimate.eps_ease)
 
@@ -197,7 +211,7 @@ class Trainer:
 
     def _set_learning_rate(self) -> float:
         t = self.cfg.train
-        p_end = schedules.progress(self.step + 1, self.total_steps)
+        p_end = self.progress(self.step + 1)
         factor = schedules.lr_factor(p_end, t.warmup, t.decay_start, t.decay_final)
         for prior in self.priors:
             factor *= prior.lr_scale(self)
@@ -212,16 +226,16 @@ class Trainer:
     def _poses_learn(self) -> bool:
         """Whether this step moves the poses: not before ``refine.pose_start``, while the
         field is still mostly noise that early corrections would chase."""
-        p_end = schedules.progress(self.step + 1, self.total_steps)
+        p_end = self.progress(self.step + 1)
         return self.poses is not None and p_end > self.cfg.refine.pose_start
 
     def train_step(self) -> dict[str, float]:
         """Run one optimisation step; return the logged scalars."""
         t_start = time.perf_counter()
         cfg = self.cfg
-        p = schedules.progress(self.step, self.total_steps)
+        p = self.progress(self.step)
         factor = self._set_learning_rate()
-        self.field.update_step(self.step, self.total_steps)
+        self.field.update_step(self.timeline.position(self.step), self.total_steps)
         anneal = cfg.render.cos_anneal_at
         self.field.cos_anneal = 1.0 if anneal <= 0 else min(1.0, p / anneal)
         self.sampler.empty_share = schedules.empty_share(p, cfg.render.empty_share,
@@ -317,7 +331,7 @@ class Trainer:
         with make_progress("it", disable=not progress) as bar:
             task = bar.add_task("fit", total=self.total_steps, completed=self.step)
             if self.plan is not None:
-                self.plan.start(self.step)
+                self.plan.start(self.step, self.progress(self.step))
             try:
                 while self.step < self.total_steps:
                     if self.deadline is not None and time.perf_counter() >= self.deadline:

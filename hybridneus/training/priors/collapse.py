@@ -34,7 +34,7 @@ import torch
 
 from hybridneus.config import CollapseGuard as GuardConfig
 from hybridneus.training.priors.base import Prior
-from hybridneus.training.schedules import progress, ramp
+from hybridneus.training.schedules import ramp
 
 
 class CollapseGuard(Prior):
@@ -66,9 +66,8 @@ class CollapseGuard(Prior):
     def lr_scale(self, trainer) -> float:
         if not self.restores:
             return 1.0
-        total = trainer.total_steps
-        p_end = progress(trainer.step + 1, total)
-        return self.scale * ramp(p_end, progress(self.warm_from, total), trainer.cfg.train.warmup)
+        p_end = trainer.progress(trainer.step + 1)
+        return self.scale * ramp(p_end, trainer.progress(self.warm_from), trainer.cfg.train.warmup)
 
     def after_logs(self, trainer, logs: dict[str, float]) -> None:
         c = self.cfg
