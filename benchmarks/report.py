@@ -449,7 +449,8 @@ def poses_section(rows: list[dict]) -> list[str]:
            "with the same refinement (what it costs where nothing needs it). Pose errors "
            "against the "
            "truth: mean (max) rotation in degrees and camera-centre shift in % of the "
-           "distance; errors drawn every N views and interpolated between say `drift N`, and "
+           "distance; errors drawn every N views and interpolated between say `drift N`, errors "
+           "drawn from another seed than 0 `noise seed S`, and "
            "the refined fits' extra settings are listed. Step-time ratios are whole-fit means "
            "(corrections learn in the second half); lines run beside other work "
            "(`--shared-machine`) leave them out (-). Targets: refined / exact Chamfer at most "
@@ -463,6 +464,8 @@ def poses_section(rows: list[dict]) -> list[str]:
     for r in rows:
         n = r["pose_noise"]
         drift = f", drift {n['smooth_views']:g}" if n.get("smooth_views") else ""
+        if n.get("seed"):  # other errors of the same size
+            drift += f", noise seed {n['seed']}"
         sets = " ".join(f"`{s}`" for s in r.get("refine_sets") or []) or "per view"
         if r.get("pose_window") is not None:
             sets += f" (chose {r['pose_window']} views)"

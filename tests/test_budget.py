@@ -175,6 +175,34 @@ def test_a_budgeted_fit_slower_than_its_probe_is_replanned_and_finishes(scene, t
     assert time.perf_counter() - started < 15.0 + 5.0
 
 
+def test_a_budgeted_fit_faster_than_its_probe_is_lengthened_when_told(scene, tmp_path,
+                                                                      monkeypatch):
+    """A probe that claims 1 s per step plans about 15 steps for an 18 s budget; with
+    train.replan_lengthen the first re-plan (at 10% of them) lengthens the schedule to what
+    the real pace allows, and the fit spends its budget on the longer schedule and reaches
+    (nearly) its end, its progress near 1."""
+    import re
+
+    import hybridneus.training.budget as budget
+
+    monkeypatch.setattr(budget, "step_seconds", lambda trainer: (1.0, 1.0, 1.0, 0.0))
+    seen = {}
+
+    def watch(trainer, logs) -> None:
+        seen["last"] = trainer.progress(trainer.step)
+
+    field = fit(scene, tiny("train.minutes=0.3", "train.seed=1", "train.replan_lengthen=true",
+                            "train.replan_at=[0.1,0.5]"),
+                [watch], out=tmp_path, device="cpu", started=time.perf_counter())
+    record = SceneRecord.load(field.run_dir / "scene.yaml")
+    planned, lengthened = map(int, re.search(r"re-planned at step \d+: (\d+) -> (\d+)",
+                                             record.steps_from).groups())
+    assert planned <= 18 and lengthened > 3 * planned, record.steps_from
+    ran = field.trainer_step if record.stopped_at is None else record.stopped_at
+    assert ran >= 0.8 * record.steps > 2 * planned, (ran, record.steps)
+    assert seen["last"] > 0.8
+
+
 def test_probing_leaves_the_trainer_as_it_was(scene):
     """A probed trainer trains exactly as one that was never probed."""
     cfg = tiny("train.iters=8", "train.seed=4")
