@@ -15,9 +15,10 @@ trained fields took 2 to 2.5 times the probe's time for the same number of sampl
 it on subnormal floats, which the field and renderer now hold at zero: docs/training.md),
 and a machine's speed drifts: on a 2-core AMD EPYC the probe's mean step varied by 6% to 13%
 (coefficient of variation) between probes a few seconds apart, with 5, 10 or 20 timed steps
-per point (docs/training.md), and more over a fit's minutes. Fits stopped at their deadline with 72-78%
-of their schedule done when the probe was too fast (the learning rate never decayed, the
-late priors never faded) and ended with up to 15% of the budget unused when it was too slow.
+per point (docs/training.md), and more over a fit's minutes. Fits stopped at their deadline
+with 72-78% of their schedule done when the probe was too fast (the learning rate never
+decayed, the late priors never faded) and ended with up to 15% of the budget unused when it
+was too slow.
 :class:`BudgetPlan` therefore re-plans at a few points of training (``train.replan_at``): it
 compares the wall-clock time the last stretch of steps took with what the probe predicted
 for them and, if the rest would overrun, shortens the schedule to what the time left allows
