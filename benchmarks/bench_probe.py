@@ -47,11 +47,10 @@ def main() -> None:
             for n in args.steps:
                 budget.PROBE_STEPS = n
                 start = time.perf_counter()
-                first, full, late, refresh = budget.step_seconds(trainer)
+                probed = budget.step_seconds(trainer)
                 seconds[n].append(time.perf_counter() - start)
-                costs = budget.StepCosts(first, full, late, refresh, budget._full_at(trainer),
-                                         trainer.cfg.render.occupancy_every)
-                means[n].append(costs.mean(0.0) * 1000.0)
+                means[n].append(1000.0 * budget.mean_step_seconds(
+                    *probed, budget._full_at(trainer), trainer.cfg.render.occupancy_every))
     finally:
         budget.PROBE_STEPS = default
     for n in args.steps:

@@ -171,8 +171,9 @@ def test_a_symlink_loop_is_an_error_naming_it(tmp_path):
         load_dataset(tmp_path / "s", overrides=SIZE)
 
 
-def test_a_checkpoint_without_its_scene_record_is_refused_by_name(tiny_scene, tmp_path,
-                                                                   run_cli):
+def _damaged_run(tiny_scene, tmp_path, damage):
+    """A copy of a tiny fit's run whose last checkpoint ``damage(state)`` changed in place
+    (the previous one removed, else it is read instead)."""
     import shutil
 
     import torch
@@ -182,9 +183,15 @@ def test_a_checkpoint_without_its_scene_record_is_refused_by_name(tiny_scene, tm
     shutil.copytree(run, copy)
     path = copy / "checkpoints" / "last.pt"
     state = torch.load(path, weights_only=True)
-    del state["scene"]
+    damage(state)
     torch.save(state, path)
-    (copy / "checkpoints" / "previous.pt").unlink()  # else the older one is read instead
+    (copy / "checkpoints" / "previous.pt").unlink()
+    return copy
+
+
+def test_a_checkpoint_without_its_scene_record_is_refused_by_name(tiny_scene, tmp_path,
+                                                                   run_cli):
+    copy = _damaged_run(tiny_scene, tmp_path, lambda state: state.pop("scene"))
     code, _, err = run_cli("mesh", str(copy), "--res", "16", "--out", str(tmp_path / "m.ply"))
     assert code == 2 and "last.pt: checkpoint lacks scene" in err and err.count("\n") == 1
     assert not (tmp_path / "m.ply").exists()
@@ -240,17 +247,8 @@ def test_a_view_lost_from_one_folder_is_named(tmp_path, sub, message):
 
 def test_a_checkpoint_with_damaged_schedule_knots_is_refused_by_name(tiny_scene, tmp_path,
                                                                       run_cli):
-    import shutil
-
-    import torch
-
-    run = next(p for p in (tiny_scene / "runs").iterdir() if p.is_dir() and not p.is_symlink())
-    copy = tmp_path / "run"
-    shutil.copytree(run, copy)
-    path = copy / "checkpoints" / "last.pt"
-    state = torch.load(path, weights_only=True)
-    state["knots"] = [[0, 0.0], [5, "half"]]
-    torch.save(state, path)
-    (copy / "checkpoints" / "previous.pt").unlink()
+    copy = _damaged_run(tiny_scene, tmp_path,
+                        lambda state: state.update(knots=[[0, 0.0], [5, "half"]]))
     code, _, err = run_cli("mesh", str(copy), "--res", "16", "--out", str(tmp_path / "m.ply"))
     assert code == 2 and "last.pt: checkpoint's schedule knots" in err and err.count("\n") == 1
+    assert not (tmp_path / "m.ply").exists()
