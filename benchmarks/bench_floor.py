@@ -7,7 +7,9 @@ the dataset's ground truth exactly as the suite scores a fit (``suite_jobs.score
 
 - ``slab``: ``ring``, the body with the plate's footprint cut through it (what the fits keep:
   the band around the plate), and ``body``, the body without the plate (the plate only);
-- ``cage``: ``no rings``, every part but the horizontal rings, and ``body``, the body alone.
+- ``cage``: ``no rings``, every part but the horizontal rings, and ``body``, the body alone;
+- ``bowl``: ``lid``, the bowl's convex hull: its outer wall closed by a flat lid across the
+  rim, which the views at the equator (most of the path) cannot tell from the hollow.
 
 ``exact`` scores the ground truth's parts themselves (the sampling's own floor).
 
@@ -55,8 +57,11 @@ def ideal_meshes(kind: str, seed: int) -> dict:
                    if float(np.ptp(p.vertices[:, 1])) >= 0.1 * float(np.ptp(p.vertices[:, 0]))]
         out["no rings"] = trimesh.util.concatenate(upright)
         out["body"] = parts[0]
+    elif kind == "bowl":
+        (bowl,) = parts
+        out["lid"] = bowl.convex_hull
     else:
-        raise SystemExit(f"error: bench_floor knows the slab and the cage, not {kind}")
+        raise SystemExit(f"error: bench_floor knows the slab, the cage and the bowl, not {kind}")
     return out
 
 
@@ -111,7 +116,7 @@ def meshed_floors(field: TruthField, gt, res: int) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("datasets", type=Path, nargs="+", help="simulated dataset folders "
-                    "(generated:slab and generated:cage for the ideal meshes)")
+                    "(generated:slab, generated:cage and generated:bowl for the ideal meshes)")
     ap.add_argument("--meshed", type=int, metavar="RES", help="score the ground truth meshed "
                     "at this resolution instead of the ideal meshes")
     common.add_arguments(ap, "floor")

@@ -114,6 +114,13 @@ def test_floor_meshes_leave_out_exactly_the_unseen_part():
     kept = sum(len(p.faces) for p in cage_parts) - sum(len(p.faces) for p in rings)
     assert len(cage["no rings"].faces) == kept
     assert len(cage["body"].faces) == len(cage_parts[0].faces)
+    (bowl,) = (p.to_trimesh() for p in generated_parts("bowl", 7))
+    lid = bench_floor.ideal_meshes("bowl", 7)["lid"]
+    (x0, y0, z0), (x1, y1, z1) = bowl.bounds
+    hollow = np.array([[(x0 + x1) / 2, y1 - 0.02 * (y1 - y0), (z0 + z1) / 2]])  # opens to +y
+    assert inside_mask(bowl, hollow).tolist() == [False]
+    assert inside_mask(lid, hollow).tolist() == [True]
+    assert np.allclose(lid.bounds, bowl.bounds)
 
 
 def test_a_meshed_floor_loses_a_wire_thinner_than_the_whole_cube_voxel_only():
