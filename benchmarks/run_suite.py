@@ -13,6 +13,11 @@ compared in one run are interleaved and share the machine's drift.
     python benchmarks/run_suite.py --scenes bunny --iters 2000 --presets fast eventneus fast-rgb
     python benchmarks/run_suite.py --generated 6 --iters 2000 --presets fast fast+train.lr=0.02
     python benchmarks/run_suite.py --scenes bunny --set priors.hull.enabled=false
+    python benchmarks/run_suite.py --scenes generated:bowl:7 --spiral even --iters 2000
+
+``--spiral`` simulates the training split along another camera path (docs/simulate.md); its
+scenes are named apart (``gen-bowl-7-even``), so their lines never mix with the default
+path's.
 
 Preset specs: ``fast``, ``quality``, ``eventneus`` (the paper's deep MLPs), ``<preset>-rgb``
 (the same model trained on the rendered RGB frames instead of the events: the upper bound),
@@ -42,6 +47,8 @@ PROCESS_START = time.perf_counter()
 
 DEFAULT_ASSETS = common.REPO.parent / "shared" / "assets"
 MESH_EXTS = ("obj", "off", "ply", "glb", "gltf", "stl")
+#: The training path of the EventNeRF synthetic scenes, which the suite simulates by default.
+DEFAULT_SPIRAL = "seiffert"
 
 
 def find_assets(assets: Path) -> dict[str, Path]:
@@ -67,11 +74,21 @@ def scene_name(source: str) -> str:
 
 
 def dataset_folder(name: str, args) -> Path:
-    """Where the suite caches the dataset of scene ``name`` at its size and noise."""
+    """Where the suite caches the dataset of scene ``name`` at its size, noise and path."""
     tag = f"{name}-{args.views}v-{args.width}x{args.height}-t{args.test_views}"
     if args.noise != (0.0, 0.0):
         tag += f"-noise{args.noise[0]:g}-{args.noise[1]:g}"
+    if getattr(args, "spiral", DEFAULT_SPIRAL) != DEFAULT_SPIRAL:
+        tag += f"-{args.spiral}"
     return args.cache / tag
+
+
+def suite_name(source: str, args) -> str:
+    """The name the suite's lines give ``source``: :func:`scene_name`, and the camera path
+    when it is not the default one."""
+    name = scene_name(source)
+    spiral = getattr(args, "spiral", DEFAULT_SPIRAL)
+    return name if spiral == DEFAULT_SPIRAL else f"{name}-{spiral}"
 
 
 def simulation_source(source: str, assets: dict[str, Path]) -> tuple[str, dict]:
@@ -103,7 +120,7 @@ def dataset_for(source: str, assets: dict[str, Path], args) -> Path:
         n_views=args.views, width=args.width, height=args.height, revolutions=8.0,
         val_views=0, test_views=args.test_views,
         noise=NoiseConfig(threshold_sigma=args.noise[0], background_rate=args.noise[1]),
-        **extra)
+        spiral=getattr(args, "spiral", DEFAULT_SPIRAL), **extra)
     simulate_dataset(mesh, folder, cfg)
     return folder
 
@@ -206,6 +223,9 @@ def main() -> None:
     ap.add_argument("--noise", type=lambda s: tuple(float(v) for v in s.split(":")),
                     default=(0.0, 0.0), metavar="SIGMA:RATE",
                     help="sensor noise: threshold sigma : background events per pixel and view")
+    ap.add_argument("--spiral", choices=("seiffert", "even", "circle"), default=DEFAULT_SPIRAL,
+                    help="camera path of the training split (default: Seiffert's spiral, the "
+                    "EventNeRF scenes' path)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
@@ -239,7 +259,7 @@ def main() -> None:
         raise SystemExit("no scenes: name --scenes, or give --generated N")
     # every dataset before the first fit: a scene that cannot be made should stop the suite
     # now, not when its turn comes hours in
-    datasets = {scene_name(s): dataset_for(s, assets, args) for s in sources}
+    datasets = {suite_name(s, args): dataset_for(s, assets, args) for s in sources}
     args.out_runs.mkdir(parents=True, exist_ok=True)
     for name, folder in datasets.items():
         for seed in args.seeds:

@@ -90,6 +90,19 @@ def test_the_generated_set_is_drawn_from_its_seed():
     assert suite.scene_name("bunny") == "bunny"
 
 
+def test_another_camera_path_is_simulated_and_named_apart(tmp_path):
+    suite = _suite_module()
+    args = argparse.Namespace(views=12, width=32, height=24, test_views=0, noise=(0.0, 0.0),
+                              cache=tmp_path, spiral="even")
+    source = "generated:bowl:3"
+    folder = suite.dataset_for(source, {}, args)
+    assert folder.name.endswith("-even") and suite.suite_name(source, args) == "gen-bowl-3-even"
+    assert json.loads((folder / "scene.json").read_text())["trajectory"] == "even"
+    default = argparse.Namespace(**{**vars(args), "spiral": "seiffert"})
+    assert suite.dataset_folder("gen-bowl-3", default) != folder
+    assert suite.suite_name(source, default) == "gen-bowl-3"
+
+
 def test_floor_meshes_leave_out_exactly_the_unseen_part():
     _suite_module()
     import bench_floor
