@@ -786,3 +786,31 @@ def test_the_probe_is_repeated_per_count_of_timed_steps(tiny_scene, tmp_path):
     for line in lines:
         assert line["repeats"] == 2 and 0 < line["min_ms"] <= line["mean_step_ms"]
         assert line["mean_step_ms"] <= line["max_ms"] and line["variation"] >= 0
+
+
+def test_part_errors_name_the_part_a_mesh_lacks(tmp_path, capsys):
+    """benchmarks/part_errors.py: a mesh with the base and without the rod recalls the base
+    whole and none of the rod."""
+    import trimesh
+
+    sys.path.insert(0, str(SUITE.parent))
+    spec = importlib.util.spec_from_file_location("part_errors", SUITE.parent / "part_errors.py")
+    part_errors = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(part_errors)
+    base = trimesh.creation.box(extents=(0.8, 0.1, 0.5))
+    rod = trimesh.creation.box(extents=(0.03, 0.6, 0.03))
+    rod.apply_translation((0.2, 0.4, 0.0))
+    data, run = tmp_path / "data", tmp_path / "run"
+    data.mkdir()
+    run.mkdir()
+    trimesh.util.concatenate([base, rod]).export(data / "gt_mesh.ply")
+    base.export(run / "mesh.ply")
+    line = {"scene": "rods", "preset": "fast", "seed": 1, "commit": "abc1234", "dirty": False,
+            "date": "2026-01-01", "iters": 100, "steps": 100, "minutes": 0, "chamfer": 0.05,
+            "run": str(run), "dataset": str(data)}
+    results = tmp_path / "suite.jsonl"
+    results.write_text(json.dumps(line) + "\n")
+    part_errors.main(["rods", "--presets", "fast", "--seed", "1", "--results", str(results)])
+    rows = [r.split("|")[1:-1] for r in capsys.readouterr().out.splitlines()[2:]]
+    assert [(int(r[3]), float(r[5])) for r in rows] == [(0, 1.0), (1, 0.0)]  # base, rod
+    assert float(rows[1][6]) > 0.1  # the rod's samples lie far from the base
