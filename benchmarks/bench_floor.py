@@ -9,7 +9,7 @@ the dataset's ground truth exactly as the suite scores a fit (``suite_jobs.score
   the band around the plate), and ``body``, the body without the plate (the plate only);
 - ``cage``: ``no rings``, every part but the horizontal rings, and ``body``, the body alone;
 - ``bowl``: ``lid``, the bowl's convex hull: its outer wall closed by a flat lid across the
-  rim, which the views at the equator (most of the path) cannot tell from the hollow.
+  rim, which the views near the equator (most of the path) hardly tell from the hollow.
 
 ``exact`` scores the ground truth's parts themselves (the sampling's own floor).
 

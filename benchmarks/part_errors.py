@@ -42,7 +42,7 @@ def run_meshes(line: dict, snapshots: bool, res: int) -> list[tuple[int, float, 
         cameras = read_camera_centres(dataset / cfg.data.split)
         for path in suite_jobs.snapshots(run)[:-1]:
             field, snap = suite_jobs.load_snapshot(cfg, path)
-            score, mesh = suite_jobs._score(field, gt, res, cameras)
+            score, mesh = suite_jobs.score_field(field, gt, res, cameras)
             out.append((int(snap["step"]), score["chamfer"], mesh))
     final = trimesh.load(run / "mesh.ply", process=False)
     out.append((int(line.get("steps") or line.get("iters") or 0), line["chamfer"], final))

@@ -78,17 +78,21 @@ def dataset_folder(name: str, args) -> Path:
     tag = f"{name}-{args.views}v-{args.width}x{args.height}-t{args.test_views}"
     if args.noise != (0.0, 0.0):
         tag += f"-noise{args.noise[0]:g}-{args.noise[1]:g}"
-    if getattr(args, "spiral", DEFAULT_SPIRAL) != DEFAULT_SPIRAL:
-        tag += f"-{args.spiral}"
+    if spiral_of(args) != DEFAULT_SPIRAL:
+        tag += f"-{spiral_of(args)}"
     return args.cache / tag
+
+
+def spiral_of(args) -> str:
+    """The training path ``args`` ask for (namespaces made before ``--spiral``: the default)."""
+    return getattr(args, "spiral", DEFAULT_SPIRAL)
 
 
 def suite_name(source: str, args) -> str:
     """The name the suite's lines give ``source``: :func:`scene_name`, and the camera path
     when it is not the default one."""
     name = scene_name(source)
-    spiral = getattr(args, "spiral", DEFAULT_SPIRAL)
-    return name if spiral == DEFAULT_SPIRAL else f"{name}-{spiral}"
+    return name if spiral_of(args) == DEFAULT_SPIRAL else f"{name}-{spiral_of(args)}"
 
 
 def simulation_source(source: str, assets: dict[str, Path]) -> tuple[str, dict]:
@@ -120,7 +124,7 @@ def dataset_for(source: str, assets: dict[str, Path], args) -> Path:
         n_views=args.views, width=args.width, height=args.height, revolutions=8.0,
         val_views=0, test_views=args.test_views,
         noise=NoiseConfig(threshold_sigma=args.noise[0], background_rate=args.noise[1]),
-        spiral=getattr(args, "spiral", DEFAULT_SPIRAL), **extra)
+        spiral=spiral_of(args), **extra)
     simulate_dataset(mesh, folder, cfg)
     return folder
 

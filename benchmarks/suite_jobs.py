@@ -99,8 +99,8 @@ def _restores(trainer) -> int:
     return int(guard[0].restores) if guard else 0
 
 
-def _score(field, gt, res: int, cameras=None, keep_cavities: bool = False,
-           component_gap: float | None = None):
+def score_field(field, gt, res: int, cameras=None, keep_cavities: bool = False,
+                component_gap: float | None = None):
     """Mesh ``field`` as ``hybridneus mesh`` does and score it against ``gt``.
 
     ``keep_cavities`` and ``component_gap`` (None: the default) change one clean-up step, so
@@ -201,14 +201,14 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     curve = []
     for path in snaps[:-1]:
         f, snap = load_snapshot(cfg, path)
-        score, _ = _score(f, gt, res, cameras)
+        score, _ = score_field(f, gt, res, cameras)
         curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), score["chamfer"]])
     field, snap = load_snapshot(cfg, snaps[-1])
-    final, mesh = _score(field, gt, res, cameras)
+    final, mesh = score_field(field, gt, res, cameras)
     curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), final["chamfer"]])
-    unfilled, _ = _score(field, gt, res)
-    cavities, _ = _score(field, gt, res, cameras, keep_cavities=True)
-    ungrouped, ungrouped_mesh = _score(field, gt, res, cameras, component_gap=0.0)
+    unfilled, _ = score_field(field, gt, res)
+    cavities, _ = score_field(field, gt, res, cameras, keep_cavities=True)
+    ungrouped, ungrouped_mesh = score_field(field, gt, res, cameras, component_gap=0.0)
     # "volume": res points span the field's crop box, as in `hybridneus mesh`; lines
     # without it were meshed over the whole cube [-1, 1]^3, with voxels 2-3x larger
     report = {**info, "run": str(run_dir), "res": res, "volume": common.CROP_VOLUME, **final,
