@@ -3,7 +3,8 @@
 A part that fires no event cannot be told from empty space by the event loss, and a fit that
 leaves it out is as consistent with the data as one that keeps it. This scores ideal meshes
 that are exact but for such a part, built from the generator's own parts and scored against
-the dataset's ground truth exactly as the suite scores a fit (``suite_jobs.score``'s Chamfer):
+the dataset's ground truth exactly as the suite scores a fit (the Chamfer of
+``suite_jobs.score_field``):
 
 - ``slab``: ``ring``, the body with the plate's footprint cut through it (what the fits keep:
   the band around the plate), and ``body``, the body without the plate (the plate only);
