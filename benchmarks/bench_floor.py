@@ -1,7 +1,8 @@
-"""What a mesh that lacks a part no event shows can score at best: Chamfer floors.
+"""What a mesh that lacks a part few views show can score at best: Chamfer floors.
 
-A part that fires no event cannot be told from empty space by the event loss, and a fit that
-leaves it out is as consistent with the data as one that keeps it. This scores ideal meshes
+A part that fires (almost) no event along the capture's path can hardly be told from empty
+space by the event loss, and a fit that leaves it out is (nearly) as consistent with the data
+as one that keeps it. This scores ideal meshes
 that are exact but for such a part, built from the generator's own parts and scored against
 the dataset's ground truth exactly as the suite scores a fit (the Chamfer of
 ``suite_jobs.score_field``):
