@@ -16,12 +16,10 @@ generated objects, whose faces are the axis directions.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-import common
 import numpy as np
-from pictures import pick_lines
+from pictures import add_line_arguments, lines_with_meshes
 
 AXES = "xyz"
 #: A ground-truth sample counts for an axis direction within this angle of it.
@@ -58,19 +56,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="\n".join(__doc__.splitlines()[1:]))
-    ap.add_argument("scene", help="scene name as in the lines (e.g. gen-box-1829338325)")
-    ap.add_argument("--presets", nargs="+", required=True)
-    ap.add_argument("--commit", default=None)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--results", type=Path, default=common.RESULTS / "suite.jsonl")
+    add_line_arguments(ap, "gen-box-1829338325")
     args = ap.parse_args()
     import trimesh
 
-    lines = [json.loads(t) for t in args.results.read_text().splitlines() if t.strip()]
+    picked = lines_with_meshes(args)
     print("| preset | Chamfer | face | share of the surface | mean distance | median signed "
           "| 90th percentile |")
     print("|---|---|---|---|---|---|---|")
-    for line in pick_lines(lines, args.scene, args.presets, args.commit, args.seed):
+    for line in picked:
         mesh = trimesh.load(Path(line["run"]) / "mesh.ply", process=False)
         gt = trimesh.load(Path(line["dataset"]) / "gt_mesh.ply", process=False)
         for r in face_errors(mesh, gt):

@@ -16,11 +16,9 @@ formed and then lost, or smooth and then lumpy, shows when.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-import common
-from pictures import pick_lines
+from pictures import add_line_arguments, lines_with_meshes
 
 
 def run_meshes(line: dict, snapshots: bool, res: int) -> list[tuple[int, float, object]]:
@@ -53,25 +51,16 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
                                  epilog="\n".join(__doc__.splitlines()[1:]))
-    ap.add_argument("scene", help="scene name as in the lines (e.g. gen-rods-1003451250)")
-    ap.add_argument("--presets", nargs="+", required=True)
-    ap.add_argument("--commit", default=None)
-    ap.add_argument("--seed", type=int, default=0)
+    add_line_arguments(ap, "gen-rods-1003451250")
     ap.add_argument("--parts", type=int, default=12, help="the largest parts shown")
     ap.add_argument("--snapshots", action="store_true",
                     help="also score the run's snapshots (the points of its Chamfer curve)")
-    ap.add_argument("--results", type=Path, default=common.RESULTS / "suite.jsonl")
     args = ap.parse_args(argv)
     import trimesh
 
     from hybridneus.evaluation.parts import part_completeness
 
-    lines = [json.loads(t) for t in args.results.read_text().splitlines() if t.strip()]
-    picked = pick_lines(lines, args.scene, args.presets, args.commit, args.seed)
-    for line in picked:
-        if not (Path(line["run"]) / "mesh.ply").is_file():
-            raise SystemExit(f"part_errors: {line['run']}: no mesh.ply (the run folders are "
-                             "on the machine that ran the fits)")
+    picked = lines_with_meshes(args)
     print("| preset | step | Chamfer | part | extents | recall | mean distance |")
     print("|---|---|---|---|---|---|---|")
     for line in picked:

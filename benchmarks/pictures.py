@@ -50,6 +50,32 @@ def pick_lines(lines: list[dict], scene: str, presets: list[str], commit: str | 
     return picked
 
 
+def add_line_arguments(ap: argparse.ArgumentParser, example: str) -> None:
+    """The arguments that name the suite lines of one scene, seed and commit, one line per
+    preset: ``scene``, ``--presets``, ``--commit``, ``--seed``, ``--results``."""
+    ap.add_argument("scene", help=f"scene name as in the lines (e.g. {example})")
+    ap.add_argument("--presets", nargs="+", required=True)
+    ap.add_argument("--commit", default=None)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--results", type=Path, default=common.RESULTS / "suite.jsonl")
+
+
+def lines_with_meshes(args: argparse.Namespace) -> list[dict]:
+    """The lines :func:`add_line_arguments`' ``args`` name (:func:`pick_lines`), each of whose
+    run folders holds its ``mesh.ply``.
+
+    Raises:
+        SystemExit: a line is missing, or its run folder has no mesh here.
+    """
+    picked = pick_lines(common.read_lines(args.results), args.scene, args.presets,
+                        args.commit, args.seed)
+    for line in picked:
+        if not (Path(line["run"]) / "mesh.ply").is_file():
+            raise SystemExit(f"{Path(line['run']) / 'mesh.ply'}: missing (the run folders "
+                             "are on the machine that ran the fits)")
+    return picked
+
+
 def budget_text(line: dict) -> str:
     """A suite line's budget as captions write it: ``15 min`` or ``2000 steps``, and where
     the mesh spans the crop's box (``"volume": "crop"``), ``2000 steps, res 300 over the

@@ -790,7 +790,7 @@ def test_the_probe_is_repeated_per_count_of_timed_steps(tiny_scene, tmp_path):
 
 def test_part_errors_name_the_part_a_mesh_lacks(tmp_path, capsys):
     """benchmarks/part_errors.py: a mesh with the base and without the rod recalls the base
-    whole and none of the rod."""
+    whole and none of the rod; a run folder without its mesh is named."""
     import trimesh
 
     sys.path.insert(0, str(SUITE.parent))
@@ -814,3 +814,6 @@ def test_part_errors_name_the_part_a_mesh_lacks(tmp_path, capsys):
     rows = [r.split("|")[1:-1] for r in capsys.readouterr().out.splitlines()[2:]]
     assert [(int(r[3]), float(r[5])) for r in rows] == [(0, 1.0), (1, 0.0)]  # base, rod
     assert float(rows[1][6]) > 0.1  # the rod's samples lie far from the base
+    (run / "mesh.ply").unlink()
+    with pytest.raises(SystemExit, match=r"run/mesh.ply: missing"):
+        part_errors.main(["rods", "--presets", "fast", "--seed", "1", "--results", str(results)])
