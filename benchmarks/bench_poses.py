@@ -59,7 +59,7 @@ def exact_copy(noisy: Path) -> Path:
 def pose_error_stats(poses: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     """Rotation error in degrees and camera-centre shift in % of the true camera distance,
     mean and largest over the views (unrounded)."""
-    from hybridneus.model.poses import pose_errors
+    from hybridneus.data.track import pose_errors
 
     degrees, moved = pose_errors(poses, truth)
     share = moved / np.linalg.norm(truth[:, :3, 3], axis=1)

@@ -1,4 +1,5 @@
-"""``hybridneus eval``: Chamfer distance, F-score and SDF-MAE of a mesh against ground truth."""
+"""``hybridneus eval``: Chamfer distance, F-score and SDF-MAE of a mesh against ground truth,
+under the unit-cube protocol or EventNeuS's published one."""
 
 from __future__ import annotations
 
@@ -18,6 +19,11 @@ def evaluate(
         int, typer.Option("--samples", help="Surface samples / SDF points.")
     ] = 10_000,
     seed: Annotated[int, typer.Option("--seed", help="Sampling seed.")] = 0,
+    protocol: Annotated[
+        str, typer.Option("--protocol", help="Chamfer protocol: unit-cube (both meshes in GT's "
+                          "unit cube, the mean of the two directions) or eventneus (each mesh "
+                          "centred on its centroid, farthest vertex at radius 1, the sum).")
+    ] = "unit-cube",
     threshold: Annotated[
         float, typer.Option("--threshold", help="F-score distance (unit cube).")
     ] = 0.01,
@@ -38,12 +44,13 @@ def evaluate(
         float, typer.Option("--error-max", help="Distance (unit cube) shown in the last colour.")
     ] = 0.02,
 ) -> None:
-    """Compare MESH with GT by the EventNeuS protocol (both in GT's unit cube)."""
+    """Compare MESH with GT: Chamfer distance (with its floor, GT against a second sampling of
+    itself), F-score, SDF-MAE (always in GT's unit cube)."""
     import json
     import time
 
     from hybridneus.errors import ConfigError
-    from hybridneus.evaluation import chamfer_distance, sdf_mae
+    from hybridneus.evaluation import PROTOCOLS, chamfer_distance, chamfer_floor, sdf_mae
     from hybridneus.evaluation.inside import SIGN_METHODS
     from hybridneus.meshing import load_mesh
 
@@ -55,12 +62,20 @@ def evaluate(
         raise ConfigError(f"--error-max {error_max}: expected a positive distance")
     if not threshold > 0:
         raise ConfigError(f"--threshold {threshold}: expected a positive distance")
+    if protocol not in PROTOCOLS:
+        raise ConfigError(f"--protocol {protocol}: expected one of {', '.join(PROTOCOLS)}")
     pred_mesh = load_mesh(mesh)
     gt_mesh = load_mesh(gt)
     start = time.perf_counter()
-    cd = chamfer_distance(pred_mesh, gt_mesh, n_samples=samples, seed=seed, threshold=threshold)
+    try:
+        cd = chamfer_distance(pred_mesh, gt_mesh, n_samples=samples, seed=seed,
+                              threshold=threshold, protocol=protocol)
+        floor = chamfer_floor(gt_mesh, n_samples=samples, seed=seed, protocol=protocol)
+    except ValueError as exc:  # a mesh without extent
+        raise ConfigError(f"{mesh} / {gt}: {exc}") from None
     result: dict = {"mesh": str(mesh), "gt": str(gt), "samples": samples, "seed": seed}
     result.update(cd.as_dict())
+    result["floor"] = floor
     if not no_sdf:
         mae = sdf_mae(pred_mesh, gt_mesh, n_points=samples, seed=seed, sign_method=sign)
         result.update(
@@ -82,15 +97,16 @@ def evaluate(
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"{mesh} vs {gt} (GT unit cube, {samples} samples, seed {seed})")
+    table = Table(title=f"{mesh} vs {gt} ({protocol} protocol, {samples} samples, seed {seed})")
     table.add_column("metric")
     table.add_column("value", justify="right")
     rows = [
         ("Chamfer distance", "chamfer"),
+        ("  floor (GT against itself)", "floor"),
         ("accuracy (pred -> gt)", "accuracy"),
         ("completeness (gt -> pred)", "completeness"),
         (f"F-score @ {threshold:g}", "fscore"),
-        ("SDF-MAE", "sdf_mae"),
+        ("SDF-MAE (GT unit cube)", "sdf_mae"),
     ]
     for label, key in rows:
         if key in result:

@@ -73,7 +73,7 @@ def dataset_report(ds, cfg) -> dict[str, Any]:
                            "splits": splits, "notes": list(ds.notes),
                            "frame": frame.to_json() if frame is not None else None}
     if cfg.data.split in ds.splits:
-        found = estimate_scene(ds, cfg.estimate, cfg.data)
+        found = estimate_scene(ds, cfg.estimate, cfg.data, cfg.refine)
         noise, balance = found.noise, found.balance
         if balance is None:
             noise, balance = noise_and_balance(ds[cfg.data.split])

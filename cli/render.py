@@ -201,7 +201,7 @@ def render(
         if "test" in kinds and split not in dataset.splits:
             raise DatasetError(f"{dataset.root}: no split {split!r} to render (it has "
                                f"{', '.join(dataset.splits)})")
-        _use_refined_poses(run_dir, dataset, cfg.data.split)
+        _use_trained_poses(run_dir, dataset, cfg.data.split)
     out_dir.mkdir(parents=True, exist_ok=True)  # only once the inputs are known good
     if "test" in kinds:
         summary = _render_test_views(field, dataset, split, out_dir, max_views, stride)
@@ -219,9 +219,9 @@ def render(
         typer.echo(f"{path}: recorded events (left) vs rendered log-difference (right)")
 
 
-def _use_refined_poses(run_dir: Path, dataset, split: str) -> None:
-    """A run fitted with ``refine.poses`` renders its training ``split`` from the refined
-    poses."""
+def _use_trained_poses(run_dir: Path, dataset, split: str) -> None:
+    """A run that smoothed its track (``refine.pose_smoothing``) renders its training
+    ``split`` from the poses it trained on."""
     import numpy as np
 
     from hybridneus.training.runlog import POSES
@@ -232,4 +232,4 @@ def _use_refined_poses(run_dir: Path, dataset, split: str) -> None:
     refined = np.load(path)["refined"]
     if split in dataset.splits and refined.shape == dataset.splits[split].c2w.shape:
         dataset.splits[split].c2w = refined
-        typer.echo(f"{split}: the run's refined poses ({path.name})")
+        typer.echo(f"{split}: the run's smoothed poses ({path.name})")

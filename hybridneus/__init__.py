@@ -20,7 +20,7 @@ from typing import Any
 
 from hybridneus.errors import ConfigError, DatasetError, HybridNeusError, MeshError, RunError
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 # public name -> module that defines it
 _LAZY: dict[str, str] = {

@@ -110,18 +110,18 @@ def prepare(
 ):
     """Build the :class:`~hybridneus.training.trainer.Trainer` and run logger of a fit.
 
-    A new fit loads the dataset, runs the estimators (:mod:`hybridneus.data.estimate`),
-    fixes the schedule's length (``train.iters``, or a ``train.minutes`` budget turned into
-    steps by :mod:`hybridneus.training.budget`) and writes the scene record
-    (:mod:`hybridneus.training.scene`); a resumed one reads that record back and estimates
-    nothing. ``started``: the ``time.perf_counter()`` at which the fit began (a budget counts
-    from there; default: now).
+    A new fit loads the dataset, runs the estimators and prepares the data the trainer
+    receives (:mod:`hybridneus.data.estimate`), fixes the schedule's length (``train.iters``,
+    or a ``train.minutes`` budget turned into steps by :mod:`hybridneus.training.budget`) and
+    writes the scene record (:mod:`hybridneus.training.scene`); a resumed one reads that record
+    back and prepares the same data from it, estimating nothing. ``started``: the
+    ``time.perf_counter()`` at which the fit began (a budget counts from there; default: now).
     """
     import logging
     import time
 
     from hybridneus import __version__
-    from hybridneus.data.estimate import estimate_scene
+    from hybridneus.data.estimate import estimate_scene, training_data
     from hybridneus.device import resolve_device
     from hybridneus.training import runs
     from hybridneus.training.runlog import RunLogger
@@ -136,16 +136,19 @@ def prepare(
     cfg = validate(_resolve_config(config, overrides))
     if out is not None:
         runs.check_runs_root(out)
+    _set_threads(cfg)
     data = load_training_data(cfg, dataset)
     cfg.data.path = cfg.data.path or str(Path(data.root).resolve())
-    found = estimate_scene(data, cfg.estimate, cfg.data)
+    found = estimate_scene(data, cfg.estimate, cfg.data, cfg.refine)
     record = SceneRecord(
         dataset=str(Path(data.root).resolve()), split=cfg.data.split,
         preset_source=data.preset_source, preset=found.dataset.preset.to_dict(),
         estimated=found.taken, eps_start=found.eps_start, steps=cfg.train.iters,
         n_rays=rays_per_step(cfg, dev), device=str(dev), version=__version__,
+        pose_window=found.pose_window,
     )
-    trainer = Trainer(cfg, found.dataset, record, dev)
+    trainer = Trainer(cfg, training_data(found.dataset, cfg, found.pose_window, dev), record,
+                      dev)
     logger = None
     if out is not None:
         logger = RunLogger(runs.new_run_dir(out, default_scene_name(data.root)), Path(out))
@@ -167,13 +170,22 @@ def prepare(
 MIN_BUDGET_STEPS = 10
 
 
+def _set_threads(cfg: Config) -> None:
+    """``train.threads`` for everything the fit computes, its data preparation included."""
+    if cfg.train.threads > 0:
+        import torch
+
+        torch.set_num_threads(cfg.train.threads)
+
+
 def _fix_budget(trainer, logger, end: float) -> None:
-    """Turn the time to ``end`` into the trainer's step count (recorded), and stop it at
-    ``end`` should the machine slow down. With a logger, the step-0 preview and checkpoint
-    are written first and timed, so that their share of the budget is known."""
+    """Turn the time to ``end`` into the trainer's step count (recorded), re-planned to the
+    pace of its steps as it goes and stopped at ``end`` should the last steps run over. With
+    a logger, the step-0 preview and checkpoint are written first and timed, so that their
+    share of the budget is known."""
     import time
 
-    from hybridneus.training.budget import BudgetPlan, budget_steps
+    from hybridneus.training.budget import REPLAN_SHARE, BudgetPlan, budget_steps
 
     t = trainer.cfg.train
     overhead, save = 0.0, 0.0
@@ -198,9 +210,8 @@ def _fix_budget(trainer, logger, end: float) -> None:
     trainer.total_steps = trainer.record.steps = steps
     trainer.record.steps_from = how
     trainer.deadline = end - save - 0.5
-    if t.replan_at:
-        trainer.plan = BudgetPlan(costs, trainer.deadline, tuple(t.replan_at),
-                                  lengthen=t.replan_lengthen)
+    trainer.plan = BudgetPlan(costs, trainer.deadline, REPLAN_SHARE * max(left, 0.0),
+                              clock=trainer.clock)
 
 
 def _same_dataset(run_dir: Path, recorded: str, given: Any) -> None:
@@ -218,6 +229,7 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
     """A trainer that continues ``run_dir`` from its last checkpoint, on the scene record's
     values (nothing is estimated again)."""
     from hybridneus.data import load_dataset
+    from hybridneus.data.estimate import training_data
     from hybridneus.training import runs
     from hybridneus.training.runlog import RunLogger
     from hybridneus.training.scene import FILENAME, SceneRecord
@@ -234,8 +246,9 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
     record = SceneRecord.load(run_dir / FILENAME)
     _same_dataset(run_dir, record.dataset, dataset)
     path = dataset if dataset is not None else record.dataset
+    _set_threads(cfg)
     data = load_dataset(path, overrides=record.preset_overrides(), splits=record.split)
-    trainer = Trainer(cfg, data, record, dev)
+    trainer = Trainer(cfg, training_data(data, cfg, record.pose_window, dev), record, dev)
     try:
         trainer.load_state_dict(state)
     except (RuntimeError, KeyError, ValueError) as exc:

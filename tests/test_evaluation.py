@@ -8,8 +8,10 @@ import trimesh
 
 from hybridneus.evaluation import (
     chamfer_distance,
+    chamfer_floor,
     color_corrected_psnr_ssim,
     inside_mask,
+    normalize_eventneus,
     psnr,
     sdf_mae,
     signed_distance,
@@ -61,6 +63,53 @@ def test_chamfer_is_measured_in_the_gt_frame_not_renormalised():
     shifted = sphere(2.0)
     shifted.apply_translation([0.4, 0.0, 0.0])  # a shift is not normalised away
     assert chamfer_distance(shifted, gt).chamfer > 0.03
+
+
+def test_the_eventneus_protocol_normalises_each_mesh_and_sums_the_two_directions():
+    """Each mesh on its own centroid with its farthest vertex at radius 1: a shifted, scaled
+    copy scores as the mesh itself; the score is accuracy + completeness."""
+    gt = sphere(2.0)
+    moved = sphere(2.0)
+    moved.apply_scale(0.3)
+    moved.apply_translation([0.5, -0.2, 0.1])
+    unit = normalize_eventneus(moved)
+    assert np.linalg.norm(unit.vertices, axis=1).max() == pytest.approx(1.0)
+    assert np.allclose(unit.centroid, 0.0, atol=1e-9)
+    same = chamfer_distance(gt, gt, protocol="eventneus")
+    assert chamfer_distance(moved, gt, protocol="eventneus").chamfer == pytest.approx(
+        same.chamfer, rel=1e-6)
+    assert same.chamfer == pytest.approx(same.accuracy + same.completeness)
+    assert same.protocol == "eventneus"
+    assert chamfer_distance(moved, gt).chamfer > 5 * same.chamfer  # unit-cube measures it
+
+
+def test_both_protocols_on_a_sphere_with_an_inner_shell():
+    """GT a unit sphere; the prediction adds a concentric shell of radius 0.5 (a fifth of its
+    area, 0.5 from GT). Neither normalisation moves the spheres (centroid 0, farthest vertex
+    at 1), so eventneus gives accuracy 0.2 x 0.5 = 0.1 and a completeness of sampling noise,
+    summed; unit-cube halves every distance (GT's box side is 2) and takes the mean."""
+    gt = sphere(1.0)
+    pred = trimesh.util.concatenate([sphere(1.0), sphere(0.5)])
+    ev = chamfer_distance(pred, gt, protocol="eventneus")
+    floor = chamfer_floor(gt, protocol="eventneus")
+    assert ev.accuracy == pytest.approx(0.1 + floor / 2, abs=0.006)
+    assert ev.chamfer == pytest.approx(0.1 + floor, abs=0.008)
+    cube = chamfer_distance(pred, gt)
+    assert cube.accuracy == pytest.approx(0.05 + chamfer_floor(gt) / 2, abs=0.004)
+    assert cube.chamfer == pytest.approx((cube.accuracy + cube.completeness) / 2)
+    with pytest.raises(ValueError, match="protocol"):
+        chamfer_distance(pred, gt, protocol="unit-sphere")
+
+
+def test_a_protocols_floor_is_the_sampling_alone():
+    gt = sphere(1.0)
+    for protocol in ("unit-cube", "eventneus"):
+        floor = chamfer_floor(gt, protocol=protocol)
+        assert 0 < floor < 0.05
+        assert chamfer_floor(gt, n_samples=40_000, protocol=protocol) < 0.6 * floor
+    # the same sampling error in a frame twice as large, summed rather than averaged
+    assert chamfer_floor(gt, protocol="eventneus") == pytest.approx(
+        4 * chamfer_floor(gt), rel=0.05)
 
 
 def test_sdf_mae_of_concentric_spheres_is_the_gap_everywhere():

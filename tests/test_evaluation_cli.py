@@ -40,6 +40,33 @@ def test_eval_prints_json_and_a_table(tmp_path, cli):
     assert code == 0 and "Chamfer distance" in stdout and "SDF-MAE" not in stdout
 
 
+def test_eval_takes_eventneus_protocol_and_reports_its_floor(tmp_path, cli):
+    gt = trimesh.creation.icosphere(subdivisions=4, radius=0.5)
+    pred = trimesh.creation.icosphere(subdivisions=4, radius=0.55)
+    pred.apply_translation([0.2, 0.0, 0.0])
+    gt.export(tmp_path / "gt.ply")
+    pred.export(tmp_path / "pred.ply")
+    runs = {}
+    for protocol in ("unit-cube", "eventneus"):
+        code, stdout, stderr = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"),
+                                   "--json", "--no-sdf", "--samples", "3000",
+                                   "--protocol", protocol)
+        assert code == 0, stderr
+        runs[protocol] = json.loads(stdout)
+        assert runs[protocol]["protocol"] == protocol and 0 < runs[protocol]["floor"]
+    # a shifted, scaled sphere is the same sphere to eventneus: its score is its floor's size
+    ev = runs["eventneus"]
+    assert ev["chamfer"] == pytest.approx(ev["accuracy"] + ev["completeness"])
+    assert ev["chamfer"] < 1.5 * ev["floor"]
+    assert runs["unit-cube"]["chamfer"] > 5 * runs["unit-cube"]["floor"]
+    code, stdout, _ = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--no-sdf",
+                          "--samples", "500", "--protocol", "eventneus")
+    assert code == 0 and "eventneus" in stdout and "floor (GT against itself)" in stdout
+    code, _, err = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--protocol",
+                       "sphere")
+    assert code == 2 and err.count("\n") == 1 and "--protocol sphere: expected one of" in err
+
+
 def test_eval_missing_file_exits_2_from_the_console_entry_point(tmp_path):
     gt = tmp_path / "gt.ply"
     trimesh.creation.box().export(gt)

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 
 from hybridneus.config import (
     Config,
@@ -47,12 +48,12 @@ def test_pixels_per_step_default_to_the_device():
 def test_overrides_are_typed():
     cfg = apply_overrides(
         Config(),
-        ["train.lr=0.005", "train.iters=10", "data.threshold=0.2", "field.learned_background=true",
+        ["train.lr=0.005", "train.iters=10", "data.threshold=0.2", "render.occupancy=false",
          "data.background=[0.5, 0.5, 0.5]", "grid.kind=dense"],
     )
     assert cfg.train.lr == 0.005 and cfg.train.iters == 10
     assert cfg.data.overrides() == {"threshold": 0.2, "background": (0.5, 0.5, 0.5)}
-    assert cfg.field.learned_background is True and cfg.grid.kind == "dense"
+    assert cfg.render.occupancy is False and cfg.grid.kind == "dense"
     cfg = apply_overrides(cfg, ["train.lr=1"])  # an int is accepted for a float
     assert isinstance(cfg.train.lr, float)
     # YAML reads "1e-8" (no point in the mantissa) as a string; a float key takes it
@@ -70,7 +71,7 @@ def test_overrides_are_typed():
         ("train.iters=1e3", "train.iters: expected an integer"),
         ("train.lr=fast", "train.lr: expected a number"),
         ("train.lr=nan", "train.lr: expected a number"),
-        ("field.learned_background=3", "expected true or false"),
+        ("render.occupancy=3", "expected true or false"),
         ("train", "expected key=value"),
         ("train=3", "is a section"),
     ],
@@ -95,9 +96,6 @@ def test_bad_overrides_raise_one_line_errors(item, message):
         ("priors.curvature.end=2", "priors.curvature.end: expected a fraction"),
         ("priors.collapse_guard.lr_factor=0", "priors.collapse_guard.lr_factor: expected in"),
         ("grid.kind=octree", "grid.kind: expected hash, dense or frequency"),
-        ("grid.domain=sphere", "grid.domain: expected crop or volume"),
-        ("field.color_activation=tanh", "field.color_activation: expected relu or softplus"),
-        ("field.color_grid_levels=-1", "field.color_grid_levels: expected >= 0"),
         ("render.n_coarse=0", "render.n_coarse: expected >= 1"),
         ("render.chunk=0", "render.chunk: expected >= 1"),
         ("render.occupancy_resolution=1", "render.occupancy_resolution: expected >= 2"),
@@ -113,13 +111,6 @@ def test_values_out_of_range_are_config_errors(item, message):
     assert message in str(info.value) and "\n" not in str(info.value)
     for name in ("fast", "quality", "eventneus"):
         validate(preset_config(name))
-
-
-def test_a_colour_grid_needs_a_grid_encoding():
-    cfg = apply_overrides(preset_config("eventneus"), ["field.color_grid_levels=8"])
-    with pytest.raises(ConfigError, match="field.color_grid_levels: needs a grid encoding"):
-        validate(cfg)
-    validate(apply_overrides(preset_config("fast"), ["field.color_grid_levels=8"]))
 
 
 def test_keys_of_hybridneus_0_1_name_their_successor(tmp_path):
@@ -143,21 +134,16 @@ def test_a_saved_run_keeps_what_it_was_trained_with(tmp_path, monkeypatch):
     from hybridneus.config.overrides import RUN_KEY_ORIGINS
     from hybridneus.training.runs import load_run_config
 
-    # a run saved before render.empty_share existed sampled no empty space
-    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  n_coarse: 24\n")
-    assert load_run_config(tmp_path).render.empty_share == RUN_KEY_ORIGINS[
-        "render.empty_share"] == 0.0
     # a key whose default has moved since: a run that lacks it gets its origin, a
     # hand-written config today's default
+    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  n_coarse: 24\n")
     monkeypatch.setitem(RUN_KEY_ORIGINS, "render.n_importance", 8)
     assert load_run_config(tmp_path).render.n_importance == 8
     assert load_config(tmp_path / "config.yaml").render.n_importance == \
         Config().render.n_importance != 8
     # a run that saved the key keeps its value
-    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  empty_share: 0.4\n"
-                                          "  n_importance: 12\n")
-    cfg = load_run_config(tmp_path)
-    assert cfg.render.empty_share == 0.4 and cfg.render.n_importance == 12
+    (tmp_path / "config.yaml").write_text("preset: fast\nrender:\n  n_importance: 12\n")
+    assert load_run_config(tmp_path).render.n_importance == 12
 
 
 def test_yaml_round_trip_and_bad_yaml(tmp_path):
@@ -213,12 +199,35 @@ def test_checking_the_runs_folder_creates_nothing(tmp_path):
         check_runs_root(tmp_path / "file")
 
 
-def test_the_shaded_colour_models_keys_are_checked():
-    def check(*overrides: str) -> None:
-        validate(apply_overrides(preset_config("fast"), list(overrides)))
+def test_keys_removed_in_0_3_are_named_and_old_runs_still_load(tmp_path, caplog):
+    """An experiment that did not become a default leaves no key: --set names it as removed;
+    a 0.2 run's config.yaml loads without it, unless the field it made had a part this
+    version cannot build."""
+    from hybridneus.config.overrides import REMOVED_KEYS
 
-    with pytest.raises(ConfigError, match="field.shading_degree: expected 0 to 4"):
-        check("field.shading_degree=5")
-    with pytest.raises(ConfigError, match="field.shading_headlight: needs field.shading_degree"):
-        check("field.shading_headlight=true")
-    check("field.shading_degree=3", "field.shading_headlight=true")
+    with pytest.raises(ConfigError, match=r"train.lr_sdf_head: unknown key \(removed in "
+                       "hybridneus 0.3"):
+        apply_overrides(Config(), ["train.lr_sdf_head=0.1"])
+    for key in REMOVED_KEYS:
+        section, *rest = key.split(".")
+        node = Config().to_dict()[section]
+        for part in rest[:-1]:
+            node = node[part]
+        assert rest[-1] not in node, key
+    # a 0.2 run: every removed key saved at its default, one training switch at another
+    saved = Config().to_dict()
+    saved["render"].update(empty_share=0.25, empty_share_until=1.0)
+    saved["train"].update(replan_at=[0.05, 0.15, 0.3, 0.5, 0.7], lr_sdf_head=1.0)
+    saved["field"].update(shading_degree=0, learned_background=False)
+    saved["refine"].update(poses=False, pose_knots=0)
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
+    with caplog.at_level("INFO", logger="hybridneus"):
+        cfg = load_config(tmp_path / "config.yaml")
+    assert cfg.to_dict() == Config().to_dict()
+    assert "render.empty_share=0.25 dropped" in caplog.text
+    assert "lr_sdf_head" not in caplog.text  # at its default: nothing to say
+    saved["field"]["shading_degree"] = 3
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
+    with pytest.raises(ConfigError, match=r"field.shading_degree=3 was removed in hybridneus "
+                       r"0.3 \(only 0 remains\); fit the scene again"):
+        load_config(tmp_path / "config.yaml")

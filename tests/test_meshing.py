@@ -7,6 +7,7 @@ import pytest
 import torch
 from scipy.spatial import cKDTree
 
+from hybridneus.data.crop import crop_sdf
 from hybridneus.meshing import (
     DEFAULT_BOUNDS,
     CropVolume,
@@ -16,7 +17,6 @@ from hybridneus.meshing import (
     extract_sdf_mesh,
 )
 from hybridneus.model.analytic import BoxField, SphereField, TorusField, UnionField
-from hybridneus.model.crop import crop_sdf
 from hybridneus.model.protocol import Field
 
 RAW = PostprocessOptions(enabled=False)

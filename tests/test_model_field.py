@@ -7,8 +7,7 @@ import pytest
 import torch
 
 from hybridneus.config import FieldConfig, GridConfig, preset_config
-from hybridneus.errors import ConfigError
-from hybridneus.model.crop import VOLUME_BOX, crop_sdf, grid_box
+from hybridneus.data.crop import crop_sdf
 from hybridneus.model.field import HybridField
 from hybridneus.model.protocol import Field
 
@@ -60,42 +59,22 @@ def test_public_sdf_is_cropped_to_the_cylinder():
     assert f.init_radius == pytest.approx(0.18)
 
 
-def test_grid_box_is_a_cube_around_the_crop_or_the_whole_volume():
-    lo_hi = np.array(grid_box((0.2, -0.3, 0.1), "crop", margin=0.5))
-    # Centred on the crop's box (y from -0.3 to 0.1), half-side 1.5 x its largest half (0.2).
-    np.testing.assert_allclose(lo_hi, [-0.3, -0.4, -0.3, 0.3, 0.2, 0.3], atol=1e-6)
-    assert grid_box((0.2, -0.3, 0.1), "volume") == VOLUME_BOX
-    # A crop whose cube would reach past the volume gets the volume itself.
-    assert grid_box((0.8, -0.8, 0.8), "crop", margin=0.3) == VOLUME_BOX
-    with pytest.raises(ConfigError, match="grid.domain"):
-        grid_box((0.2, -0.3, 0.1), "sphere")
-
-
-def test_the_grid_spans_its_box_and_old_checkpoints_keep_the_volume():
+def test_the_grid_spans_the_volume_and_a_saved_box_is_dropped():
+    """The grid reads ``(x + 1) / 2``; a 0.2 checkpoint, which saved the box its grid spanned,
+    loads into today's field."""
     torch.manual_seed(0)
     grid = GridConfig(n_levels=4, log2_table_size=12, base_resolution=8, max_resolution=32)
-    crop = (0.2, -0.2, 0.2)
-    assert grid.domain == "volume"  # the default
-    grid.domain = "crop"
-    f = HybridField(grid, FieldConfig(), crop=crop)
-    np.testing.assert_allclose(f.grid_box.numpy(), grid_box(crop), atol=1e-6)
+    f = HybridField(grid, FieldConfig(), crop=(0.2, -0.2, 0.2))
     # Geometric init zeroes the weights reading the grid; give them values first.
     torch.nn.init.normal_(f.sdf_net.layers[0].weight, std=0.1)
     f.update_step(10**6, 1)
     p = torch.rand(64, 3) * 0.4 - 0.2
-
-    def read_at(field, unit):
-        return field.sdf_net(torch.cat([p, field.encoding(unit)], dim=-1))[:, 0]
-
-    lo, hi = f.grid_box[:3], f.grid_box[3:]
-    torch.testing.assert_close(f.raw_sdf(p), read_at(f, (p - lo) / (hi - lo)))
-    # A checkpoint from before grid.domain (no grid_box) was trained on the whole volume.
-    g = HybridField(grid, FieldConfig(), crop=crop)
-    g.load_state_dict({k: v for k, v in f.state_dict().items() if k != "grid_box"})
+    read = f.sdf_net(torch.cat([p, f.encoding((p + 1) / 2)], dim=-1))[:, 0]
+    torch.testing.assert_close(f.raw_sdf(p), read)
+    g = HybridField(grid, FieldConfig(), crop=(0.2, -0.2, 0.2))
+    g.load_state_dict({**f.state_dict(), "grid_box": torch.tensor([-1.0] * 3 + [1.0] * 3)})
     g.update_step(10**6, 1)
-    assert torch.equal(g.grid_box, torch.tensor(VOLUME_BOX))
-    torch.testing.assert_close(g.raw_sdf(p), read_at(g, (p + 1) / 2))
-    assert not torch.allclose(f.raw_sdf(p), g.raw_sdf(p))
+    torch.testing.assert_close(g.raw_sdf(p), f.raw_sdf(p))
 
 
 def test_eikonal_gradient_reaches_the_grid_tables():
@@ -151,55 +130,12 @@ def test_eventneus_preset_builds_the_paper_network():
     assert out[1].shape == (8, 3)
 
 
-def test_learned_background_is_a_parameter():
-    f = small_field(learned_background=True)
-    names = [n for n, _ in f.named_parameters()]
-    assert "background_logit" in names
-    assert torch.allclose(f.background(), torch.full((3,), 159 / 255), atol=1e-4)
-
-
 def test_the_untrained_colour_starts_at_the_sigmoid_midpoint():
     grey = small_field()
     pts = torch.rand(500, 3) * 0.6 - 0.3
     dirs = torch.nn.functional.normalize(torch.randn(500, 3), dim=-1)
     with torch.no_grad():
         assert (grey.color(pts, dirs) - 0.5).abs().max() < 0.05
-
-
-def _colour_grads(f: HybridField) -> tuple[float, float]:
-    """|d colour / d SDF grid tables| and |d colour / d colour grid tables| with the normal
-    held fixed, so that only the feature path is measured."""
-    torch.nn.init.normal_(f.sdf_net.layers[0].weight, std=0.1)
-    pts = torch.rand(256, 3) * 2 - 1
-    dirs = torch.nn.functional.normalize(torch.randn(256, 3), dim=-1)
-    _, feats = f.sdf_and_features(pts)
-    f.radiance(pts, dirs, dirs, feats).sum().backward()
-
-    def total(grid) -> float:
-        return sum(float(t.grad.abs().sum()) for t in grid.tables if t.grad is not None)
-
-    return total(f.encoding), (total(f.color_encoding) if f.color_encoding is not None
-                               else 0.0)
-
-
-def test_colour_grid_keeps_texture_out_of_the_sdf_features():
-    shared = small_field()
-    assert shared.color_encoding is None
-    to_sdf, _ = _colour_grads(shared)
-    assert to_sdf > 0  # the shared features carry colour gradients into the SDF grid
-    own = small_field(color_grid_levels=3)
-    to_sdf, to_colour = _colour_grads(own)
-    assert to_sdf == 0 and to_colour > 0
-    with torch.no_grad():
-        rgb = own.color(torch.zeros(4, 3), torch.tensor([[0.0, 0.0, 1.0]] * 4))
-    assert rgb.shape == (4, 3)
-
-
-def test_colour_grid_needs_a_grid_encoding():
-    with pytest.raises(ConfigError, match="color_grid_levels"):
-        HybridField(GridConfig(kind="frequency"), FieldConfig(color_grid_levels=4))
-    with pytest.raises(ConfigError, match="color_grid_levels"):
-        small_field(color_grid_levels=-1)
 
 
 def _subnormal_share(t: torch.Tensor) -> float:
@@ -240,73 +176,14 @@ def test_the_sdf_head_of_a_field_uses_the_flushed_softplus():
     assert f.sdf_net.activation.beta == FieldConfig().softplus_beta
 
 
-def _radiance_at(f: HybridField, normals: torch.Tensor) -> torch.Tensor:
-    """Colours at one point, one view and one feature vector, seen with ``normals``."""
-    n = normals.shape[0]
-    pts = torch.full((n, 3), 0.1)
-    dirs = torch.tensor([[0.0, 0.0, 1.0]]).expand(n, 3)
+def test_the_colour_head_reads_the_normal():
+    """The same point and view change colour with the normal (SH of the view, the normal
+    and the features go into the head)."""
+    f = small_field()
+    normals = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    pts = torch.full((2, 3), 0.1)
+    dirs = torch.tensor([[0.0, 0.0, 1.0]]).expand(2, 3)
     _, feats = f.sdf_and_features(pts)
     with torch.no_grad():
-        return f.radiance(pts, dirs, normals, feats)
-
-
-def test_a_shaded_field_is_its_albedo_times_one_shading_of_the_normal():
-    normals = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, 0.0, 0.8],
-                            [0.0, 0.0, 5.0]])
-    # today's head reads the normal: the same point and view change colour with it
-    free = _radiance_at(small_field(), normals)
-    assert (free[0] - free[1]).abs().max() > 1e-3
-    shaded = small_field(shading_degree=2)
-    assert shaded.shading is not None and shaded.shading.coeffs.shape == (3, 4)
-    # unshaded at the start: the albedo alone, whatever the normal
-    flat = _radiance_at(shaded, normals)
-    assert torch.allclose(flat, flat[:1].expand_as(flat), atol=1e-7)
-    # w on Y_1^0 = sqrt(3 / (4 pi)) z, per channel: the shading is exp(w c z)
-    w = torch.tensor([0.5, -0.3, 1.0])
-    with torch.no_grad():
-        shaded.shading.coeffs[:, 2] = w
-    lit = _radiance_at(shaded, normals)
-    c = np.sqrt(3 / (4 * np.pi))
-    z = torch.tensor([1.0, -1.0, 0.8, 1.0])
-    expected = flat * torch.exp(w[None, :] * c * z[:, None])
-    assert torch.allclose(lit, expected, rtol=1e-5)
-    assert torch.allclose(shaded.shade(normals[3:]), shaded.shade(normals[:1]))  # unit normal
-    assert torch.equal(small_field().shade(normals), torch.ones(4, 3))
-
-
-def test_a_shaded_fields_shading_learns_and_its_public_colour_stays_in_range():
-    f = small_field(shading_degree=3)
-    pts = torch.rand(64, 3) * 0.4 - 0.2
-    dirs = torch.nn.functional.normalize(torch.randn(64, 3), dim=-1)
-    _, grad, feats = f.sdf_gradient_features(pts)
-    f.radiance(pts, dirs, grad, feats).sum().backward()
-    assert f.shading.coeffs.grad is not None and f.shading.coeffs.grad.abs().sum() > 0
-    with torch.no_grad():
-        f.shading.coeffs[:, 0] = 3.0  # a shading far above 1
-    rgb = f.color(pts, dirs)
-    assert float(rgb.max()) <= 1.0 and float(rgb.min()) >= 0.0
-
-
-def test_shading_degree_is_checked():
-    with pytest.raises(ConfigError, match="shading_degree"):
-        small_field(shading_degree=5)
-    with pytest.raises(ConfigError, match="shading_degree"):
-        small_field(shading_degree=-1)
-
-
-def test_a_headlight_shades_by_the_cosine_between_the_normal_and_the_view():
-    f = small_field(shading_degree=1, shading_headlight=True)
-    assert f.shading.headlight is not None and f.shading.headlight.shape == (3, 2)
-    normals = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.6, -0.8], [0.0, 0.0, 1.0]])
-    dirs = torch.tensor([[0.0, 0.0, 1.0]]).expand(3, 3)  # looking along +z
-    assert torch.equal(f.shade(normals, dirs), torch.ones(3, 3))  # unlit at the start
-    u = torch.tensor([[0.5, -0.2], [1.0, 0.0], [0.0, 0.3]])
-    with torch.no_grad():
-        f.shading.headlight.copy_(u)
-    c = torch.tensor([1.0, 0.8, -1.0])[:, None]  # cosines to the camera
-    expected = torch.exp(c * u[:, 0][None] + c * c * u[:, 1][None])
-    assert torch.allclose(f.shade(normals, dirs), expected, rtol=1e-6)
-    with pytest.raises(ValueError, match="dirs"):
-        f.shade(normals)
-    with pytest.raises(ConfigError, match="shading_headlight"):
-        small_field(shading_headlight=True)
+        rgb = f.radiance(pts, dirs, normals, feats)
+    assert (rgb[0] - rgb[1]).abs().max() > 1e-3

@@ -66,29 +66,6 @@ def test_the_sharpness_ceiling_holds_a_runaway_sharpness_at_its_bound(scene):
     assert 0.85 * 2 * ceiling < wider <= 2 * ceiling * (1 + 1e-5)
 
 
-def test_a_ceiling_that_follows_the_levels_bounds_by_the_finest_open_one(scene):
-    """With priors.sharpness_ceiling.follow_levels, three of TINY's six levels open (8 -> 64)
-    scale the bound by the third level's resolution over the sixth's, and the runaway is held
-    there; with every level open the bound is the plain ceiling."""
-    import math
-
-    cfg = tiny("train.iters=300", "priors.sharpness_ceiling.follow_levels=true")
-    trainer, _ = prepare(scene, cfg, device="cpu")
-    with torch.no_grad():
-        trainer.field.variance.fill_(math.log(5e6) / 10.0)
-    trainer.fit([stop_at(3)], progress=False)
-    assert trainer.step == 3
-    prior = _prior(trainer, SharpnessCeiling)
-    assert trainer.field.active_levels() == 3
-    b = (64 / 8) ** (1 / 5)
-    held = prior.bound(trainer.field)
-    assert held == pytest.approx(prior.ceiling * 8 * b**2 / 64)
-    assert 0.85 * held < float(trainer.field.inv_s()) <= held * (1 + 1e-5)
-    trainer.field.update_step(300, 300)
-    assert trainer.field.active_levels() == 6
-    assert prior.bound(trainer.field) == pytest.approx(prior.ceiling)
-
-
 # --------------------------------------------------------------------------- curvature
 
 
@@ -139,30 +116,6 @@ def test_curvature_weight_falls_linearly_to_zero_by_its_end(scene):
     trainer.step = 4
     logs = trainer.train_step()
     assert "loss/curvature" in logs and logs["loss/curvature"] > 0
-
-
-def test_curvature_event_weight_leaves_rays_that_fired_to_the_data(scene):
-    """``event_weight`` scales the rays whose pixels fired; 1 treats every ray alike."""
-    from types import SimpleNamespace
-
-    trainer, _ = prepare(scene, tiny("train.iters=1"), device="cpu")
-    target = torch.tensor([0.0, 0.4, -0.2, 0.0])
-    ctx = SimpleNamespace(batch=SimpleNamespace(target=target), origins=torch.zeros(8, 3))
-    alike = CurvaturePrior(tiny().priors.curvature)
-    assert alike.ray_weights(ctx) == 1.0
-    silent = CurvaturePrior(tiny("priors.curvature.event_weight=0.1").priors.curvature)
-    assert silent.ray_weights(ctx).tolist() == pytest.approx([1, 0.1, 0.1, 1] * 2)
-    # in a step: with weight 0 and every pixel firing, nothing is left to smooth
-    only_silent = tiny("train.iters=1", "priors.curvature.event_weight=0",
-                       "data.neg_ratio=0")
-    trainer, _ = prepare(scene, only_silent, device="cpu")
-    batch = trainer.windows.sample(64)
-    assert bool((batch.target != 0).all())
-    trainer.next_batch = lambda: batch
-    assert trainer.train_step()["loss/curvature"] == 0.0
-    trainer, _ = prepare(scene, tiny("train.iters=1", "data.neg_ratio=0"), device="cpu")
-    trainer.next_batch = lambda: batch
-    assert trainer.train_step()["loss/curvature"] > 0.0
 
 
 # --------------------------------------------------------------------------- sharpness floor

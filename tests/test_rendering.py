@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import pytest
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_flatten
@@ -145,35 +144,6 @@ def test_sampler_concentrates_samples_near_the_surface():
     mids, w = _render_sphere(origins, dirs, t, inv_s=100.0)
     depth = (w * mids).sum(-1) / w.sum(-1).clamp_min(1e-6)
     assert torch.allclose(depth, t_hit, atol=0.02)
-
-
-def test_empty_share_spreads_coarse_samples_over_empty_space():
-    origins, dirs = _rays(8, seed=3)
-    aabb = torch.tensor([-1.0, -1, -1, 1, 1, 1])
-    occ = OccupancyGrid(aabb, 32)
-    occ.update(sphere_sdf, inv_s=100.0)
-    t_near, t_far, _ = ray_aabb_intersect(origins, dirs, aabb, 0.05)
-    pts_of = lambda t: origins[:, None] + dirs[:, None] * t[..., None]  # noqa: E731
-
-    def coarse(share: float) -> torch.Tensor:
-        sampler = NeuSSampler(aabb, n_coarse=32, n_importance=0, occupancy=occ,
-                              empty_share=share)
-        return sampler(origins, dirs, sphere_sdf, generator=torch.Generator().manual_seed(0))
-
-    def in_empty_cells(t: torch.Tensor) -> torch.Tensor:
-        return (~occ.query(pts_of(t).reshape(-1, 3))).reshape(t.shape).sum(-1)
-
-    # occupied space only, but for a sample in a march step that merely touches a cell
-    assert (in_empty_cells(coarse(0.0)) <= 1).all()
-    half = coarse(0.5)
-    assert (in_empty_cells(half) >= 8).all()  # every ray now samples its empty stretches
-    assert ((half >= t_near[:, None] - 1e-5) & (half <= t_far[:, None] + 1e-5)).all()
-    everywhere = coarse(1.0)  # plain stratified samples over the box chord
-    steps = (everywhere[:, 1:] - everywhere[:, :-1]) / (t_far - t_near)[:, None]
-    assert steps.max() < 2.0 / 32
-    with pytest.raises(ValueError, match="empty_share"):
-        NeuSSampler(aabb, empty_share=1.5)
-
 
 
 class _SubnormalWatch(TorchDispatchMode):

@@ -61,22 +61,6 @@ def test_schedules_are_the_same_at_the_same_progress_whatever_the_length():
     assert short == pytest.approx(long)
 
 
-def test_the_sdf_heads_rate_rises_geometrically_to_the_fields_then_holds():
-    assert S.head_rate(0.0, 0.1, 0.3) == pytest.approx(0.1)
-    assert S.head_rate(0.15, 0.1, 0.3) == pytest.approx(math.sqrt(0.1))  # half way, in log
-    assert S.head_rate(0.3, 0.1, 0.3) == pytest.approx(1.0)
-    assert S.head_rate(0.9, 0.1, 0.3) == pytest.approx(1.0)
-    for p in (0.0, 0.5, 1.0):  # no rise: the share holds
-        assert S.head_rate(p, 0.1, 0.0) == pytest.approx(0.1)
-
-
-def test_the_empty_share_holds_then_fades_out_over_a_tenth():
-    assert [S.empty_share(p, 0.25, 0.6) for p in (0.0, 0.6, 0.65, 0.7, 1.0)] == pytest.approx(
-        [0.25, 0.25, 0.125, 0.0, 0.0])
-    assert S.empty_share(0.99, 0.25, 1.0) == 0.25  # until 1: throughout
-    assert S.empty_share(0.0, 0.25, 0.0) == 0.25 and S.empty_share(0.1, 0.25, 0.0) == 0.0
-
-
 def test_a_timeline_never_resized_is_step_over_total():
     line = S.Timeline(7)
     for step in range(9):

@@ -1,14 +1,15 @@
-"""Smoothing a jittery camera track (``refine.pose_smoothing``)."""
+"""Smoothing a jittery camera track (``refine.pose_smoothing``), and captures simulated with
+known pose errors."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 from fitting import tiny
 from scipy.spatial.transform import Rotation
 
-from hybridneus.data.track import choose_window, filter_is_exact, smooth_track
-from hybridneus.model.poses import pose_errors
+from hybridneus.data.track import choose_window, filter_is_exact, pose_errors, smooth_track
 
 
 def _orbit(n: int, turns: float = 2.0, radius: float = 1.0) -> np.ndarray:
@@ -108,7 +109,9 @@ def test_the_track_chooses_a_longer_window_the_more_it_jitters():
     assert choose_window(truth[:20], 5) == 0  # too short to score
 
 
-def test_a_fit_trains_on_the_smoothed_track_and_saves_it(scene, tmp_path):
+def test_a_fit_trains_on_the_smoothed_track_and_saves_it(scene, tmp_path, run_cli):
+    import cv2
+
     from hybridneus.api import fit
     from hybridneus.data.dataset import load_dataset
     from hybridneus.training import runs
@@ -123,6 +126,11 @@ def test_a_fit_trains_on_the_smoothed_track_and_saves_it(scene, tmp_path):
     assert not np.allclose(saved["refined"], given)
     state = runs.load_checkpoint(done.run_dir)
     np.testing.assert_allclose(state["scene"]["cameras"], saved["refined"][:, :3, 3])
+    assert cv2.imread(str(done.run_dir / "previews" / "poses.png")) is not None
+    code, out, err = run_cli("render", str(done.run_dir), "--views", "events", "--out",
+                             str(tmp_path / "r"), "--windows", "1", "--device", "cpu")
+    assert code == 0, err
+    assert "train: the run's smoothed poses (poses_refined.npz)" in out
     plain = fit(scene, tiny("train.iters=2"), out=tmp_path / "b", device="cpu")
     assert not (plain.run_dir / POSES).exists()
 
@@ -141,3 +149,46 @@ def test_a_fit_chooses_its_window_from_the_track_and_records_it(scene, tmp_path)
     np.testing.assert_allclose(np.load(done.run_dir / POSES)["refined"],
                                smooth_track(given, record.pose_window))
     assert any("smoothed over" in line or "too short" in line for line in record.lines())
+
+
+def test_a_resumed_fit_smooths_over_the_recorded_window_and_ends_as_one_never_stopped(
+        scene, tmp_path):
+    """The window chosen from the track is prepared again from ``scene.yaml`` on --resume
+    (nothing is estimated again), so the resumed fit trains on the same track."""
+    from fitting import params, stop_at
+
+    from hybridneus.api import fit
+
+    cfg = tiny("train.iters=8", "train.seed=5", "refine.pose_smoothing=-1")
+    straight = fit(scene, cfg, out=tmp_path / "a", device="cpu")
+    first = fit(scene, cfg, [stop_at(4)], out=tmp_path / "b", device="cpu")
+    assert first.interrupted
+    resumed = fit(None, None, resume=first.run_dir, device="cpu")
+    a, b = params(straight), params(resumed)
+    for k in a:
+        assert torch.equal(a[k], b[k]), k
+
+
+def test_a_realistic_capture_writes_erroneous_poses_and_keeps_the_truth(tmp_path):
+    from hybridneus.data import load_dataset
+    from hybridneus.simulate import CaptureErrors, SimulationConfig, simulate_dataset
+
+    base = dict(n_views=40, width=32, height=24, val_views=0, test_views=2, revolutions=1.0,
+                supersample=1)
+    simulate_dataset("builtin:device", tmp_path / "exact", SimulationConfig(**base))
+    capture = CaptureErrors(rotation_deg=0.5, translation=0.01, clock_offset_views=0.25)
+    simulate_dataset("builtin:device", tmp_path / "noisy",
+                     SimulationConfig(**base, capture=capture))
+    exact = load_dataset(tmp_path / "exact")
+    noisy = load_dataset(tmp_path / "noisy")
+    truth = np.stack([np.loadtxt(p) for p in
+                      sorted((tmp_path / "noisy" / "train" / "pose_true").glob("*.txt"))])
+    np.testing.assert_allclose(truth, exact["train"].c2w, atol=1e-9)
+    # the same events (rendered from the truth); only the written training poses differ
+    np.testing.assert_array_equal(noisy["train"].events.t, exact["train"].events.t)
+    np.testing.assert_allclose(noisy["test"].c2w, exact["test"].c2w)
+    degrees, moved = pose_errors(noisy["train"].c2w, truth)
+    step = np.degrees(np.arccos(np.clip((np.trace(truth[1, :3, :3].T @ truth[0, :3, :3]) - 1)
+                                        / 2, -1, 1)))
+    assert 0.3 < np.sqrt(np.mean(degrees**2)) < 0.5 + 0.25 * step + 0.2
+    assert 0.004 < np.sqrt(np.mean(moved**2)) / np.linalg.norm(truth[0, :3, 3])

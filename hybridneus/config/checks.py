@@ -35,11 +35,6 @@ def _fraction(v: float) -> bool:
 #: (key, test, what the value must be): checked by :func:`validate`.
 _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("grid.kind", lambda v: v in ("hash", "dense", "frequency"), "hash, dense or frequency"),
-    ("grid.domain", lambda v: v in ("crop", "volume"), "crop or volume"),
-    ("grid.domain_margin", lambda v: v >= 0, ">= 0"),
-    ("field.color_activation", lambda v: v in ("relu", "softplus"), "relu or softplus"),
-    ("field.color_grid_levels", lambda v: v >= 0, ">= 0 (0: the SDF's features)"),
-    ("field.shading_degree", lambda v: 0 <= v <= 4, "0 to 4 (0: the colour head reads the normal)"),
     ("grid.n_levels", lambda v: v >= 1, ">= 1"),
     ("grid.n_features", lambda v: v >= 1, ">= 1"),
     ("grid.base_resolution", lambda v: v >= 2, ">= 2"),
@@ -56,12 +51,8 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("render.chunk", lambda v: v >= 1, ">= 1"),
     ("render.near_min", lambda v: v >= 0, ">= 0"),
     ("render.crop_softness", lambda v: v >= 0, ">= 0"),
-    ("render.empty_share", _fraction, "a share in [0, 1]"),
-    ("render.empty_share_until", _fraction, "a fraction of training in [0, 1]"),
     ("train.iters", lambda v: v >= 1, ">= 1"),
     ("train.minutes", lambda v: v >= 0, ">= 0 (0: no budget)"),
-    ("train.replan_at", lambda v: all(0 < a < 1 for a in v) and list(v) == sorted(v),
-     "ascending fractions of training in (0, 1)"),
     ("train.n_rays", lambda v: v >= 0, ">= 0 (0: the device's default)"),
     ("train.lr", lambda v: v > 0, "> 0"),
     ("train.lr_variance", lambda v: v >= 0, ">= 0"),
@@ -75,10 +66,6 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("train.checkpoint_every", lambda v: v >= 0, ">= 0 (0: only at the end)"),
     ("train.checkpoint_seconds", lambda v: v >= 0, ">= 0 (0: by steps only)"),
     ("train.window", lambda v: v in ("per_iteration", "per_load"), "per_iteration or per_load"),
-    ("train.view_balance", _fraction, "a share in [0, 1]"),
-    ("train.windows_per_step", lambda v: v >= 1, ">= 1"),
-    ("train.lr_sdf_head", lambda v: v > 0, "> 0"),
-    ("train.lr_sdf_head_until", _fraction, "a fraction of training in [0, 1]"),
     ("train.supervision", lambda v: v in ("events", "rgb"), "'events' or 'rgb'"),
     ("loss.n_random_points", lambda v: v >= 0, ">= 0"),
     ("estimate.eps_max", lambda v: v >= 0, ">= 0 (0: no cap)"),
@@ -87,7 +74,6 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("priors.hull.ramp", _fraction, "a fraction of training in [0, 1]"),
     ("priors.curvature.step", lambda v: v > 0, "> 0"),
     ("priors.curvature.end", _fraction, "a fraction of training in [0, 1]"),
-    ("priors.curvature.event_weight", lambda v: v >= 0, ">= 0"),
     ("priors.sharpness_ceiling.per_cell", lambda v: v > 0, "> 0"),
     ("priors.sharpness_floor.at", lambda v: 0 < v <= 1, "a fraction of training in (0, 1]"),
     ("priors.sharpness_floor.delay", _fraction, "a fraction of training in [0, 1]"),
@@ -96,10 +82,6 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("priors.collapse_guard.retries", lambda v: v >= 0, ">= 0"),
     ("priors.collapse_guard.lr_factor", lambda v: 0 < v <= 1, "in (0, 1]"),
     ("priors.collapse_guard.explode", lambda v: v == 0 or v > 1, "> 1 (0: off)"),
-    ("refine.pose_lr", lambda v: v > 0, "> 0"),
-    ("refine.pose_start", _fraction, "a fraction of training in [0, 1]"),
-    ("refine.pose_weight", lambda v: v >= 0, ">= 0"),
-    ("refine.pose_knots", lambda v: v >= 0, ">= 0 (0: one correction per view)"),
     ("refine.pose_smoothing", lambda v: v >= -1, ">= -1 (0: off, -1: chosen from the track)"),
     ("refine.pose_smoothing_order", lambda v: v >= 1, ">= 1"),
 ]
@@ -125,12 +107,6 @@ def validate(cfg: Config) -> Config:
         value = _get(cfg, key)
         if not ok(value):
             raise ConfigError(f"{key}: expected {what}, got {value!r}")
-    if cfg.field.color_grid_levels > 0 and cfg.grid.kind == "frequency":
-        raise ConfigError("field.color_grid_levels: needs a grid encoding (grid.kind hash or "
-                          "dense), not frequency")
-    if cfg.field.shading_headlight and cfg.field.shading_degree == 0:
-        raise ConfigError("field.shading_headlight: needs field.shading_degree > 0 (the "
-                          "shaded colour model)")
     _check_pose_smoothing(cfg.refine.pose_smoothing, cfg.refine.pose_smoothing_order)
     weights = [f"loss.{f.name}" for f in dataclasses.fields(cfg.loss)
                if f.name.startswith("lambda_")]

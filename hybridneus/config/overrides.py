@@ -4,6 +4,7 @@ hybridneus 0.1 configs."""
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import types
@@ -115,9 +116,67 @@ LEGACY_KEYS: dict[str, str | None] = {
     "field.color_init": None,
     "field.color_init_distance": None,
 }
+#: Keys removed in hybridneus 0.3, experiments that were measured and not adopted: their
+#: default then (what this version does) and whether another value made a field this version
+#: cannot build. A saved config that holds one loads without it; one whose field had such a
+#: part is refused (:func:`config_from_dict`).
+REMOVED_KEYS: dict[str, tuple[Any, bool]] = {
+    "grid.domain": ("volume", True),
+    "grid.domain_margin": (0.3, False),
+    "field.prefit_steps": (0, False),
+    "field.color_activation": ("relu", True),
+    "field.color_grid_levels": (0, True),
+    "field.shading_degree": (0, True),
+    "field.shading_headlight": (False, True),
+    "field.learned_background": (False, True),
+    "render.empty_share": (0.0, False),
+    "render.empty_share_until": (1.0, False),
+    "render.cos_anneal_at": (0.0, False),
+    "train.replan_at": ([0.05, 0.15, 0.3, 0.5, 0.7], False),
+    "train.replan_lengthen": (False, False),
+    "train.lr_sdf_head": (1.0, False),
+    "train.lr_sdf_head_until": (0.0, False),
+    "train.view_balance": (0.0, False),
+    "train.windows_per_step": (1, False),
+    "priors.curvature.event_weight": (1.0, False),
+    "priors.sharpness_ceiling.follow_levels": (False, False),
+    "refine.poses": (False, False),
+    "refine.pose_knots": (0, False),
+    "refine.clock_offset": (False, False),
+    "refine.pose_lr": (0.0005, False),
+    "refine.pose_start": (0.5, False),
+    "refine.pose_weight": (0.01, False),
+    "refine.pose_gauge": (False, False),
+}
 #: Old keys whose value 0 meant "off": they also set their prior's ``enabled``.
 _LEGACY_SWITCHES = {"loss.lambda_curvature", "loss.lambda_hull", "train.inv_s_floor",
                     "train.collapse_opacity"}
+
+
+def _drop_removed(data: dict[str, Any], source: str) -> tuple[dict[str, Any], list[str]]:
+    """``data`` without the keys of :data:`REMOVED_KEYS`, and a note for each dropped at
+    another value than its default.
+
+    Raises:
+        ConfigError: a removed key at a value that made a field this version cannot build.
+    """
+    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in data.items()}
+    notes = []
+    for key, (default, shapes_field) in REMOVED_KEYS.items():
+        section, *middle, name = key.split(".")
+        node = out.get(section)
+        for part in middle:
+            node = node.get(part) if isinstance(node, dict) else None
+        if not isinstance(node, dict) or name not in node:
+            continue
+        value = node.pop(name)
+        if value == default:
+            continue
+        if shapes_field:
+            raise ConfigError(f"{source}: {key}={value!r} was removed in hybridneus 0.3 (only "
+                              f"{default!r} remains); fit the scene again")
+        notes.append(f"{key}={value!r} dropped")
+    return out, notes
 
 
 def _migrate(data: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
@@ -167,6 +226,9 @@ def set_value(cfg: Config, key: str, value: Any) -> None:
                 new = LEGACY_KEYS[key]
                 hint = f"now {new}" if new else "removed in hybridneus 0.2"
                 raise ConfigError(f"{key}: unknown key ({hint}; docs/training.md)")
+            if key in REMOVED_KEYS:
+                raise ConfigError(f"{key}: unknown key (removed in hybridneus 0.3, an experiment "
+                                  "that did not become a default)")
             where = ".".join(parts[:i]) or "config"
             raise ConfigError(
                 f"{key}: unknown key {part!r} in {where}; expected one of {sorted(fields)}"
@@ -224,11 +286,13 @@ def config_from_dict(data: dict[str, Any], source: str = "config") -> Config:
         raise ConfigError(f"{source}: preset: expected a string, got {preset!r}")
     cfg = preset_config(preset)
     data, notes = _migrate(data)
+    data, dropped = _drop_removed(data, source)
     if notes:
-        import logging
-
         logging.getLogger("hybridneus").info(
             "%s: a hybridneus 0.1 config; %s", source, "; ".join(notes))
+    if dropped:
+        logging.getLogger("hybridneus").info(
+            "%s: keys removed in hybridneus 0.3; %s", source, "; ".join(dropped))
     try:
         for key, value in data.items():
             if key == "preset":
@@ -251,9 +315,8 @@ def save_config(cfg: Config, path: str | os.PathLike) -> None:
 #: software did before the key existed. A run's saved config that lacks one of them was
 #: trained with that value, so :func:`load_config` with ``saved_run=True`` restores it
 #: instead of today's default. A key belongs here once its default moves, and stays when it
-#: moves back (``render.empty_share`` was 0.25 at commits 5b412bf to 3b825d3, runs of which
-#: saved it).
-RUN_KEY_ORIGINS: dict[str, Any] = {"render.empty_share": 0.0}
+#: moves back.
+RUN_KEY_ORIGINS: dict[str, Any] = {}
 
 
 def _has_key(data: dict[str, Any], key: str) -> bool:

@@ -25,8 +25,6 @@ class GridConfig:
     n_frequencies: int = 8  # kind=frequency: number of octave bands (EventNeuS: 8 to 9)
     frequency_start: int = 0  # kind=frequency: bands active at step 0 (N_fmin)
     frequency_anneal_at: float = 0.5  # kind=frequency: fraction of training at all bands
-    domain: str = "volume"  # grid span: crop (a cube around the crop box) or volume ([-1, 1]^3)
-    domain_margin: float = 0.3  # domain=crop: cube half-side = (1 + this) x the box's largest half
 
     @property
     def opened_at(self) -> float:
@@ -45,17 +43,11 @@ class FieldConfig:
     feature_dim: int = 15  # geometric features passed from the SDF head to the colour head
     softplus_beta: float = 100.0  # Softplus sharpness in the SDF head
     init_radius: float = 0.5  # initial sphere radius (world units; capped by the crop radius)
-    prefit_steps: int = 0  # extra Adam steps fitting the initial sphere (0: geometric init only)
     color_hidden: int = 64  # width of the colour head's hidden layers
     color_layers: int = 2  # number of hidden layers in the colour head
-    color_activation: str = "relu"  # relu | softplus
     sh_degree: int = 4  # spherical-harmonics degree of the view encoding (degree**2 values)
     color_position_frequencies: int = 0  # PE(x) bands fed to the colour head (0: none)
-    color_grid_levels: int = 0  # own hash grid for the colour head (0: it reads the SDF's features)
-    shading_degree: int = 0  # >0: colour = albedo x a scene-wide shading of the normal (SH bands)
-    shading_headlight: bool = False  # the shading also has a light at the camera (needs a degree)
     inv_s_init: float = 0.3  # NeuS variance parameter v; inv_s = exp(10 v)
-    learned_background: bool = False  # learn the background colour instead of the preset's
 
 
 @dataclass
@@ -71,10 +63,7 @@ class RenderConfig:
     occupancy_every: int = 16  # steps between occupancy refreshes
     occupancy_band: float = 3.0  # cells within band / inv_s (+ half a cell diagonal) are kept
     occupancy_march: int = 128  # look-ups per ray when placing samples in occupied space
-    empty_share: float = 0.0  # share of coarse samples spread over the whole ray, occupied or not
-    empty_share_until: float = 1.0  # training fraction after which that share fades out (1: never)
     crop_softness: float = 0.01  # width of the soft crop-cylinder edge (world units)
-    cos_anneal_at: float = 0.0  # fraction of training over which NeuS's cos term anneals
     chunk: int = 65536  # points per chunk when rendering without gradients
     near_min: float = 0.05  # smallest ray start distance from the camera
 
@@ -94,32 +83,19 @@ class LossConfig:
     random_box_margin: float = 0.15  # random points fill the crop box grown by this fraction
 
 
-#: Where a budgeted fit (``train.minutes``) compares its pace with the probe's and shortens a
-#: schedule that would overrun (fractions of training; ``[]``: the step count stays as planned).
-REPLAN_AT = (0.05, 0.15, 0.3, 0.5, 0.7)
-
-
 @dataclass
 class TrainConfig:
     """Optimiser, length and logging. Schedules are fractions of training."""
 
     iters: int = 2000  # steps, unless train.minutes sets a budget
     minutes: float = 0.0  # wall-clock budget of the whole fit (0: none); turned into steps
-    replan_at: list[float] = field(default_factory=lambda: list(REPLAN_AT))  # budget re-plans
-    replan_lengthen: bool = False  # re-plans may also lengthen a schedule that would end early
     n_rays: int = 0  # pixels per step, each at both window ends (0: 256 on CPU, 1024 on CUDA)
     lr: float = 0.01  # grid and heads
     lr_variance: float = 0.01  # NeuS variance parameter (sharpness)
-    # Adam moves every weight of the SDF head's output row by about the learning rate per
-    # step, and its hidden units are all positive, so the head can shift the whole SDF by
-    # tenths within a few steps (docs/accuracy.md, "Why a field empties").
-    lr_sdf_head: float = 1.0  # the SDF head's learning rate, as a multiple of train.lr
-    # 0 holds train.lr_sdf_head throughout; otherwise it rises geometrically to 1 by then
-    lr_sdf_head_until: float = 0.0  # fraction of training at which the SDF head reaches train.lr
     betas: list[float] = field(default_factory=lambda: [0.9, 0.99])  # Adam betas
     adam_eps: float = 1e-15  # Adam epsilon
     # A tenth: warmed up over 0.005, fields emptied or ran away in sharpness while only the
-    # coarse levels were open (docs/accuracy.md, "A longer warm-up").
+    # coarse levels were open (commit 733ccb8, result lines in suite.jsonl).
     warmup: float = 0.1  # fraction of training over which the learning rate warms up
     decay_start: float = 0.5  # fraction of training after which the lr decays exponentially
     decay_final: float = 0.1  # lr multiplier reached at the last step
@@ -130,10 +106,6 @@ class TrainConfig:
     checkpoint_every: int = 500  # steps between checkpoints (and always at the end)
     checkpoint_seconds: float = 60.0  # a checkpoint at least this often, wall seconds (0: off)
     window: str = "per_iteration"  # event-window sampling: per_iteration | per_load
-    view_balance: float = 0.0  # share of windows drawn evenly over viewing directions
-    # 1: every step is one window's pixels. More spread a step's pixels over that many
-    # windows, so that per-view pose corrections (refine.poses) learn from many views a step.
-    windows_per_step: int = 1  # event windows sharing a step's pixels
     supervision: str = "events"  # events, or rgb: the rgb/ frames (2 * n_rays pixels per step)
 
 
@@ -209,9 +181,7 @@ class CurvaturePrior:
 
     Assumes surfaces are smooth at the scale of ``step``: the term penalises the change of
     the normal between each rendered surface point and a point ``step`` away. A flat face of
-    one colour fires events only along its outline, and without the term it wrinkles; where
-    pixels fire, the events speak for the shape themselves, and ``event_weight`` below 1
-    leaves those rays more to the data. Costs
+    one colour fires events only along its outline, and without the term it wrinkles. Costs
     one extra SDF gradient pass on two points per ray. Its weight falls to 0 by ``end``, so
     that late training gives fine detail back to the data; switch it off for objects made
     of fine detail (fur, foliage).
@@ -221,7 +191,6 @@ class CurvaturePrior:
     weight: float = 0.05  # weight of the mean squared normal change
     step: float = 0.01  # distance to the shifted point (world units)
     end: float = 0.5  # fraction of training at which the weight has fallen to 0 (0: constant)
-    event_weight: float = 1.0  # weight of rays whose pixels fired, against 1 for silent ones
 
 
 @dataclass
@@ -254,16 +223,10 @@ class SharpnessCeiling:
     116 benchmark fits ran away so (to 31,000 and 1,000,000) and failed; none of the others
     ended above 890. Costs nothing; binds only a runaway. Switch it off to let the sharpness
     grow freely (the paper's NeuS).
-
-    ``follow_levels``: while coarse-to-fine has opened only the coarse levels, the finest
-    cell the field can use is theirs, many times the finest level's; the bound then scales
-    with the finest active level's resolution (about 210 with five of ``fast``'s 16 levels
-    open instead of 2,700), so an early runaway is held where the open grid places a surface.
     """
 
     enabled: bool = True
     per_cell: float = 4.0  # the bound is per_cell / (finest grid cell): about 2200 for fast
-    follow_levels: bool = False  # the finest *active* level's cell while coarse-to-fine opens
 
 
 @dataclass
@@ -303,17 +266,10 @@ class PriorsConfig:
 
 @dataclass
 class RefineConfig:
-    """What a capture states imperfectly, learned with the field (docs/training.md,
-    "Refinement"). Off by default: on exact poses it can only cost accuracy and time."""
+    """What a capture states imperfectly, mended before the fit (docs/training.md, "Jittery
+    poses"). Off by default: an exact track has nothing to mend."""
 
-    poses: bool = False  # learn a rotation and a translation correction of the training poses
-    pose_knots: int = 0  # corrections along the track: 0 one per view, K spread evenly (1: one)
-    clock_offset: bool = False  # with refine.poses: learn a clock offset (views), poses to events
-    pose_lr: float = 0.0005  # Adam learning rate of the corrections (radians, world units)
-    pose_start: float = 0.5  # fraction of training before which the corrections stay zero
-    pose_weight: float = 0.01  # weight of the corrections' mean square (keeps them small)
-    pose_gauge: bool = False  # take the track's common shift, turn and scale out of the corrections
-    # views: filter the given track's jitter before the fit (docs/training.md; 0: off)
+    # views: filter the given track's jitter before the fit (0: off)
     pose_smoothing: int = 0  # window of the track's polynomial fit, views (odd; -1: from the track)
     pose_smoothing_order: int = 5  # degree of that polynomial
 

@@ -1,10 +1,15 @@
-"""What a fit takes from the data when nothing states it: threshold, polarity offset, crop, eps.
+"""What a fit takes from the data when nothing states it (threshold, polarity offset, crop,
+eps, the track's smoothing window), and the data it trains on, prepared from those.
 
 Each estimator is switched by ``estimate.<name>`` (:class:`hybridneus.config.EstimateConfig`)
 and never overrides a value the config sets (``data.<name>``). The sensor-noise filter runs
 once and serves the offset estimate; the event silhouettes are outlined once and shared by
-the crop and the hull prior (they are cached on the event stream). The values taken, with one
-line each on how, go into the run's ``scene.yaml``; ``hybridneus info`` prints the same.
+the crop and the hull prior's free space (they are cached on the event stream). The values
+taken, with one line each on how, go into the run's ``scene.yaml``; ``hybridneus info``
+prints the same. :func:`training_data` then prepares what the trainer receives: the training
+split with its track smoothed (``refine.pose_smoothing``) and the free space of the events'
+visual hull (``priors.hull``). A resumed fit prepares the same from its ``scene.yaml``,
+estimating nothing again.
 
 - **Threshold** (:mod:`hybridneus.data.threshold`, off by default): the ON and OFF thresholds
   whose replay of the sensor over the split's ``rgb/`` frames fires the stream's events, when
@@ -20,6 +25,8 @@ line each on how, go into the run's ``scene.yaml``; ``hybridneus info`` prints t
 - **Tonemap eps** (:mod:`hybridneus.data.contrast`): the preset's eps capped at
   ``estimate.eps_max`` and at what the events' largest log-brightness changes need; the loss
   eases into it from the preset's over ``estimate.eps_ease`` of training.
+- **Track window** (:func:`hybridneus.data.track.choose_window`): with
+  ``refine.pose_smoothing=-1``, the window the track's own jitter and motion support.
 """
 
 from __future__ import annotations
@@ -29,8 +36,8 @@ import logging
 from dataclasses import dataclass, field
 from typing import Any
 
-from hybridneus.config import DataConfig, EstimateConfig
-from hybridneus.data.dataset import EventDataset
+from hybridneus.config import Config, DataConfig, EstimateConfig, RefineConfig
+from hybridneus.data.dataset import EventDataset, SplitData
 from hybridneus.data.presets import apply_overrides
 from hybridneus.errors import DatasetError
 
@@ -55,6 +62,8 @@ class Estimates:
         warnings: findings that contradict a stated value.
         noise: the noise filter's one-line report, when the offset estimate ran it.
         balance: the :class:`~hybridneus.data.balance.PolarityBalance`, likewise.
+        pose_window: the views the training track is to be smoothed over, chosen from the
+            track (``refine.pose_smoothing=-1``; 0: too short to smooth), else ``None``.
     """
 
     dataset: EventDataset
@@ -64,6 +73,7 @@ class Estimates:
     warnings: list[str] = field(default_factory=list)
     noise: str | None = None
     balance: Any = None
+    pose_window: int | None = None
 
     def take(self, values: dict[str, Any], why: str) -> None:
         """Put ``values`` into the dataset's preset (on a copy) and record ``why``."""
@@ -75,7 +85,8 @@ class Estimates:
 
 
 def estimate_scene(
-    dataset: EventDataset, cfg: EstimateConfig, data: DataConfig | None = None
+    dataset: EventDataset, cfg: EstimateConfig, data: DataConfig | None = None,
+    refine: RefineConfig | None = None,
 ) -> Estimates:
     """Run the estimators ``cfg`` switches on over ``dataset``'s training split.
 
@@ -84,6 +95,8 @@ def estimate_scene(
         cfg: which estimators run, and their settings.
         data: the config's dataset section: a value set there is never estimated, and
             ``data.split`` names the split the events come from. Default: nothing set.
+        refine: the config's ``refine`` section: ``pose_smoothing=-1`` chooses the track's
+            window. Default: no smoothing.
 
     Returns:
         The :class:`Estimates`; ``dataset`` itself is not changed.
@@ -111,6 +124,13 @@ def estimate_scene(
         _crop(found, split)
     if cfg.tonemap_eps and data.tonemap_eps is None:
         _tonemap_eps(found, split, cfg.eps_max)
+    if refine is not None and refine.pose_smoothing < 0:
+        from hybridneus.data.track import choose_window
+
+        found.pose_window = choose_window(split.c2w, refine.pose_smoothing_order)
+        found.lines.append(
+            f"track: smoothed over {found.pose_window} views, chosen from the track"
+            if found.pose_window else "track: too short to smooth; poses as given")
     for line in found.lines:
         log.info(line)
     for line in found.warnings:
@@ -216,3 +236,70 @@ def _tonemap_eps(found: Estimates, split, eps_max: float) -> None:
     found.lines.append(f"tonemap eps: {why}")
     found.eps_start = float(p.tonemap_eps)
     found.take({"tonemap_eps": eps}, why)
+
+
+@dataclass
+class TrainingData:
+    """What a fit trains on, prepared before the trainer is built (:func:`training_data`).
+
+    Attributes:
+        dataset: the dataset, its preset holding the values the fit uses.
+        split: the training split as trained on (its track smoothed where asked).
+        given_c2w: (n_views, 4, 4) the training track as the data states it.
+        smoothed: whether ``split``'s track was smoothed.
+        free_space: where the events' visual hull says there is no matter, over the crop's
+            box (``priors.hull``), or ``None`` (the prior off, or nothing outlined).
+        frame: a converted recording's own frame (``scene.json``), which meshes go back to,
+            or ``None``.
+    """
+
+    dataset: EventDataset
+    split: SplitData
+    given_c2w: Any
+    smoothed: bool = False
+    free_space: Any = None
+    frame: dict | None = None
+
+
+def training_data(dataset: EventDataset, cfg: Config, pose_window: int | None = None,
+                  device: Any = "cpu") -> TrainingData:
+    """Prepare ``dataset`` for a fit of ``cfg``: smooth the training track over
+    ``refine.pose_smoothing`` views (``pose_window`` where that is -1: the window
+    :func:`estimate_scene` chose) and outline the hull's free space over the crop's box, its
+    votes counted on ``device``. Nothing is estimated here; ``dataset`` is not changed."""
+    import dataclasses
+
+    import numpy as np
+    import torch
+
+    from hybridneus.data.crop import crop_aabb
+    from hybridneus.recordings.frame import read_scene_frame
+
+    split = dataset[cfg.data.split]
+    given = split.c2w
+    window = cfg.refine.pose_smoothing
+    if window < 0:
+        if pose_window is None:
+            raise ValueError("training_data: refine.pose_smoothing=-1 needs the chosen window")
+        window = pose_window
+    if window:
+        from hybridneus.data.track import smooth_track
+
+        split = dataclasses.replace(
+            split, c2w=smooth_track(split.c2w, window, cfg.refine.pose_smoothing_order))
+    free = None
+    if cfg.priors.hull.enabled:
+        from hybridneus.data.hull import NOTHING_OUTLINED, event_free_space
+
+        p = dataset.preset
+        box = crop_aabb(torch.tensor([float(p.crop_r), float(p.crop_y_min),
+                                      float(p.crop_y_max)]))
+        lo, hi = (a.numpy().astype(np.float64) for a in (box[:3], box[3:]))
+        free = event_free_space(split, lo, hi, cfg.priors.hull.resolution, device=device)
+        log.info(f"hull: {NOTHING_OUTLINED}; no hull prior" if free is None else
+                 f"hull: the events' visual hull calls {free.free_fraction:.0%} of the crop "
+                 "box empty (priors.hull)")
+    root = getattr(dataset, "root", None)
+    frame = read_scene_frame(root) if root is not None else None
+    return TrainingData(dataset, split, given, bool(window), free,
+                        frame.to_json() if frame is not None else None)

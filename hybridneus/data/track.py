@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["choose_window", "exact_windows", "filter_is_exact", "smooth_track"]
+__all__ = ["choose_window", "exact_windows", "filter_is_exact", "pose_errors", "smooth_track"]
 
 # A window that predicts a view from its neighbours needs views on both sides; the shortest
 # one scored, and the share of the track the longest may span.
@@ -146,3 +146,12 @@ def smooth_track(c2w: np.ndarray, window: int, order: int = 5) -> np.ndarray:
     out[:, :3, :3] = Rotation.from_quat(quat).as_matrix()
     out[:, :3, 3] = _filter(c2w[:, :3, 3], window, order)
     return out
+
+
+def pose_errors(estimated: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-view rotation error (degrees) and camera-centre error (world units) of
+    ``estimated`` (n, 4, 4) against ``truth`` (n, 4, 4)."""
+    rel = np.einsum("nji,njk->nik", estimated[:, :3, :3], truth[:, :3, :3])
+    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return (np.degrees(np.arccos(cos)),
+            np.linalg.norm(estimated[:, :3, 3] - truth[:, :3, 3], axis=1))

@@ -164,9 +164,6 @@ class RayBatch:
         view1: view index of ``t1`` (an integer value).
         t0: window start as a fraction of ``T`` (wrapped into [0, 1]).
         t1: window end as a fraction of ``T``.
-        rot0: (3, 3) float32 camera-to-world rotation at ``t0`` (a pose correction turns
-            the rays about it), or None.
-        rot1: (3, 3) float32 camera-to-world rotation at ``t1``, or None.
     """
 
     origins0: torch.Tensor
@@ -180,8 +177,6 @@ class RayBatch:
     view1: float
     t0: float = 0.0
     t1: float = 0.0
-    rot0: torch.Tensor | None = None
-    rot1: torch.Tensor | None = None
 
     def to(self, device: str | torch.device) -> RayBatch:
         """Copy of the batch with every tensor on ``device``."""
@@ -195,42 +190,6 @@ class RayBatch:
         return int(self.target.shape[0])
 
 
-def concat_batches(batches: list[RayBatch]) -> RayBatch:
-    """One batch of the rays of several windows, in order (the rendering and the event loss
-    treat every ray alike). The per-window fields (``view0`` ... ``rot1``) are the first
-    window's: a pose correction has to move each window's rays before they are joined.
-    """
-    if len(batches) == 1:
-        return batches[0]
-    first = batches[0]
-    values = {}
-    for f in fields(first):
-        v = getattr(first, f.name)
-        if isinstance(v, torch.Tensor) and f.name not in ("rot0", "rot1"):
-            v = torch.cat([getattr(b, f.name) for b in batches])
-        values[f.name] = v
-    return RayBatch(**values)
-
-
-def direction_weights(c2w: np.ndarray, radius_deg: float = 10.0) -> np.ndarray:
-    """(n_views,) weights summing to 1 that even out the viewing directions of ``c2w``
-    (n_views, 4, 4): each view's is 1 over the number of views looking within
-    ``radius_deg`` of its direction.
-
-    A Seiffert spiral (EventNeRF's synthetic path) circles near the equator for most of the
-    capture, so faces that only high views see well, such as the top of a flat object, get a
-    small share of uniformly drawn windows; these weights give every part of the path a share
-    by the directions it covers, not by its views.
-    """
-    from scipy.spatial import cKDTree
-
-    forward = c2w[:, :3, 2] / np.linalg.norm(c2w[:, :3, 2], axis=1, keepdims=True)
-    chord = 2.0 * np.sin(np.deg2rad(radius_deg) / 2.0)  # the angle as a distance on the sphere
-    near = cKDTree(forward).query_ball_point(forward, chord, return_length=True)
-    weights = 1.0 / np.maximum(near, 1)
-    return weights / weights.sum()
-
-
 class EventWindowSampler:
     """Draws event windows and ray batches from one split.
 
@@ -242,8 +201,6 @@ class EventWindowSampler:
             as the EventNeuS paper) or ``"per_load"`` (integer length in 1..max_window drawn
             once per view, as the EventNeRF reference code).
         device: device of the returned tensors.
-        view_balance: share of windows whose end view is drawn with :func:`direction_weights`
-            (even over viewing directions) instead of uniformly over views.
 
     Raises:
         DatasetError: the split has fewer than 2 views.
@@ -261,7 +218,6 @@ class EventWindowSampler:
         seed: int = 0,
         window: Literal["per_iteration", "per_load"] = "per_iteration",
         device: str | torch.device = "cpu",
-        view_balance: float = 0.0,
     ) -> None:
         if window not in ("per_iteration", "per_load"):
             raise ConfigError(f"window: expected 'per_iteration' or 'per_load', got {window!r}")
@@ -280,14 +236,10 @@ class EventWindowSampler:
         self.per_load_len = self.rng.integers(1, preset.max_window + 1, size=self.n_views)
         first = 0 if preset.cyclic else 1
         self.views = np.arange(first, self.n_views)
-        self.view_p = None  # uniform
-        if view_balance > 0:
-            even = direction_weights(split.c2w[first:])
-            self.view_p = (1.0 - view_balance) / len(self.views) + view_balance * even
 
     def draw_window(self) -> tuple[int, float, float]:
         """Pick a view and a window: ``(view1, t0, t1)`` (``t0 < 0`` means it wraps)."""
-        i = int(self.rng.choice(self.views, p=self.view_p))
+        i = int(self.rng.choice(self.views))
         t1 = i * self.dt
         if self.window == "per_iteration":
             t0 = t1 - self.l_max + self.rng.random() * self.l_max
@@ -320,13 +272,6 @@ class EventWindowSampler:
         idx[n_pos:] = self.rng.integers(0, h * w, size=n_rays - n_pos)
         return np.stack([idx % w, idx // w], axis=1)
 
-    def sample_windows(self, n_rays: int, windows: int) -> list[RayBatch]:
-        """``windows`` batches of random windows sharing ``n_rays`` pixels (as evenly as
-        they divide; at least one pixel each)."""
-        windows = max(1, min(windows, n_rays))
-        return [self.sample(n_rays // windows + (k < n_rays % windows))
-                for k in range(windows)]
-
     def sample(self, n_rays: int) -> RayBatch:
         """A batch of ``n_rays`` pixels of one random window.
 
@@ -357,6 +302,4 @@ class EventWindowSampler:
             view1=float(i),
             t0=t0_wrapped / self.t_max,
             t1=t1 / self.t_max,
-            rot0=torch.as_tensor(c2w0[:3, :3], dtype=torch.float32, device=self.device),
-            rot1=torch.as_tensor(sp.c2w[i][:3, :3], dtype=torch.float32, device=self.device),
         )

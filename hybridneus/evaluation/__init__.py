@@ -14,9 +14,12 @@ from hybridneus.evaluation.error_map import (
     vertex_errors,
 )
 from hybridneus.evaluation.geometry import (
+    PROTOCOLS,
     ChamferResult,
     SdfMaeResult,
     chamfer_distance,
+    chamfer_floor,
+    normalize_eventneus,
     normalize_pair,
     sdf_mae,
     unit_cube_transform,
@@ -39,16 +42,19 @@ from hybridneus.evaluation.inside import (
 from hybridneus.evaluation.parts import PartResult, part_completeness
 
 __all__ = [
+    "PROTOCOLS",
     "ChamferResult",
     "ImageMetrics",
     "PartResult",
     "SdfMaeResult",
     "apply_log_color_correction",
     "chamfer_distance",
+    "chamfer_floor",
     "color_corrected_psnr_ssim",
     "error_image",
     "fit_log_color_correction",
     "inside_mask",
+    "normalize_eventneus",
     "normalize_pair",
     "part_completeness",
     "psnr",

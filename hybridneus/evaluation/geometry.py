@@ -1,15 +1,26 @@
-"""Mesh-to-mesh metrics of the EventNeuS paper: Chamfer distance (+ F-score) and SDF-MAE.
+"""Mesh-to-mesh metrics: Chamfer distance (+ F-score) under two protocols, and SDF-MAE.
 
-Frame: both meshes are mapped by the SAME similarity transform, the one that takes the ground
-truth's axis-aligned bounding box into the unit cube: x' = (x - centre_gt) / L_gt + 0.5, with
-centre_gt the box centre and L_gt its longest side. The ground truth then spans [0, 1] along
-its longest axis, and every distance below is in units of that side; a prediction that is off
-in scale or position is measured, not normalised away.
+``unit-cube`` (the default, as the EventNeuS paper describes it): both meshes are mapped by
+the SAME similarity transform, the one that takes the ground truth's axis-aligned bounding box
+into the unit cube: x' = (x - centre_gt) / L_gt + 0.5, with centre_gt the box centre and L_gt
+its longest side. The ground truth then spans [0, 1] along its longest axis, and every
+distance is in units of that side; a prediction that is off in scale or position is
+measured, not normalised away. CD = (accuracy + completeness) / 2.
 
-Chamfer: 10^4 points sampled uniformly by area on each surface (seeded), nearest neighbours
-both ways with a KD-tree; accuracy = mean pred -> gt distance, completeness = mean gt -> pred,
-CD = (accuracy + completeness) / 2; F-score at threshold tau = 0.01 (1% of the unit cube):
-2 P R / (P + R), P = share of pred samples within tau of gt samples, R = the converse.
+``eventneus`` (EventNeuS's published evaluation script, which its paper's table uses): EACH
+mesh is centred on its own centroid (trimesh's, the area-weighted mean of its triangles'
+centroids) and scaled so that its farthest vertex lies at radius 1; CD = accuracy +
+completeness, the sum. A prediction off in position or scale is normalised on its own, so
+this protocol forgives what the other measures; its numbers are larger than the other's on
+the same meshes (a sum, not a mean, in a frame one to two times as large), so the two never
+mix in one table.
+
+Both: 10^4 points sampled uniformly by area on each surface (seeded), nearest neighbours
+both ways with a KD-tree; accuracy = mean pred -> gt distance, completeness = mean gt -> pred;
+F-score at threshold tau = 0.01 of the protocol's unit: 2 P R / (P + R), P = share of pred
+samples within tau of gt samples, R = the converse. A protocol's floor (:func:`chamfer_floor`)
+is the ground truth scored against a second sampling of itself: the sampling's own share of
+any score, below which no mesh can go.
 
 SDF-MAE: n points, half near the surfaces (points sampled on the two surfaces, a quarter of
 all points each, moved by a uniform offset in [-1%, +1%] of the largest side of the box
@@ -27,10 +38,13 @@ import trimesh
 
 from hybridneus.evaluation.inside import signed_distance
 
+#: The Chamfer protocols (see the module docstring).
+PROTOCOLS = ("unit-cube", "eventneus")
+
 
 @dataclass(frozen=True)
 class ChamferResult:
-    """Chamfer distance and its parts, in the ground truth's unit-cube frame."""
+    """Chamfer distance and its parts, in the frame of ``protocol``."""
 
     chamfer: float
     accuracy: float
@@ -39,6 +53,7 @@ class ChamferResult:
     precision: float
     recall: float
     threshold: float
+    protocol: str = "unit-cube"
 
     def as_dict(self) -> dict[str, float]:
         """The fields as a plain dict (for JSON)."""
@@ -93,6 +108,16 @@ def normalize_pair(
     return apply(pred), apply(gt)
 
 
+def normalize_eventneus(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """A copy of ``mesh`` centred on its (area-weighted) centroid and scaled so that its
+    farthest vertex lies at radius 1 (the ``eventneus`` protocol)."""
+    v = np.asarray(mesh.vertices, dtype=np.float64) - np.asarray(mesh.centroid, np.float64)
+    radius = float(np.linalg.norm(v, axis=1).max()) if len(v) else 0.0
+    if not np.isfinite(radius) or radius <= 0.0:
+        raise ValueError("mesh has no extent to normalise (a point, or no vertices)")
+    return trimesh.Trimesh(v / radius, np.asarray(mesh.faces), process=False)
+
+
 def _seeds(seed: int, n: int) -> list[np.random.SeedSequence]:
     """Independent, reproducible child seeds, so that two meshes never share a sample stream."""
     return np.random.SeedSequence(seed).spawn(n)
@@ -112,21 +137,31 @@ def chamfer_distance(
     seed: int = 0,
     threshold: float = 0.01,
     normalize: bool = True,
+    protocol: str = "unit-cube",
 ) -> ChamferResult:
-    """Paper-protocol Chamfer distance of ``pred`` against ``gt`` (see module docstring).
+    """Chamfer distance of ``pred`` against ``gt`` under ``protocol`` (module docstring).
 
     Args:
         pred: predicted mesh (a trimesh or a mesh file path).
-        gt: ground-truth mesh (defines the normalisation).
+        gt: ground-truth mesh (defines the ``unit-cube`` normalisation).
         n_samples: surface samples per mesh.
         seed: sampling seed; the same seed gives the same numbers.
-        threshold: F-score distance, in unit-cube units.
-        normalize: map both meshes into gt's unit cube first (False: world units).
+        threshold: F-score distance, in the protocol's units.
+        normalize: normalise as the protocol says (False: world units, the mean of the two
+            directions).
+        protocol: ``unit-cube`` or ``eventneus``.
+
+    Raises:
+        ValueError: an unknown protocol, or (``eventneus``) a mesh without extent.
     """
     from scipy.spatial import cKDTree
 
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol: expected one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     pred, gt = as_mesh(pred), as_mesh(gt)
-    if normalize:
+    if normalize and protocol == "eventneus":
+        pred, gt = normalize_eventneus(pred), normalize_eventneus(gt)
+    elif normalize:
         pred, gt = normalize_pair(pred, gt)
     s_pred, s_gt = _seeds(seed, 2)
     p = sample_surface(pred, n_samples, s_pred)
@@ -137,15 +172,25 @@ def chamfer_distance(
     precision = float((d_pred < threshold).mean())
     recall = float((d_gt < threshold).mean())
     fscore = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+    summed = normalize and protocol == "eventneus"
     return ChamferResult(
-        chamfer=0.5 * (accuracy + completeness),
+        chamfer=(accuracy + completeness) * (1.0 if summed else 0.5),
         accuracy=accuracy,
         completeness=completeness,
         fscore=fscore,
         precision=precision,
         recall=recall,
         threshold=threshold,
+        protocol=protocol,
     )
+
+
+def chamfer_floor(gt: MeshLike, n_samples: int = 10_000, seed: int = 0,
+                  protocol: str = "unit-cube") -> float:
+    """The Chamfer distance of ``gt`` against a second sampling of itself under
+    ``protocol``: the part of any score that is the sampling's, below which no mesh can go."""
+    gt = as_mesh(gt)
+    return chamfer_distance(gt, gt, n_samples, seed, protocol=protocol).chamfer
 
 
 def sdf_mae_points(

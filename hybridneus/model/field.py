@@ -1,20 +1,15 @@
 """The hybrid NeuS field: a feature grid with small SDF and colour heads.
 
 ``HybridField`` implements :class:`hybridneus.model.protocol.Field`. World points are encoded
-by a multiresolution grid spanning :func:`grid_box` (the whole volume [-1, 1]^3 by default,
-or a cube around the crop box), or by annealed frequencies for the ``eventneus`` preset, and
+by a multiresolution grid spanning the volume [-1, 1]^3, or by annealed frequencies for the
+``eventneus`` preset, and
 
 - the SDF head maps ``[x, encoding]`` through Softplus(beta=100) layers to
   ``1 + feature_dim`` values (SDF first), geometrically initialised to a sphere;
 - the colour head maps ``[SH(view dir), normal = grad SDF, features (, PE(x))]`` to RGB
-  through a sigmoid; with ``field.color_grid_levels > 0`` it reads its own hash grid's
-  features and only a detached copy of the SDF head's, so that texture is learned by the
-  colour grid and cannot pull the surface into relief through the shared features;
-- with ``field.shading_degree > 0`` the head no longer reads the normal: it gives an albedo,
-  multiplied by one shading of the normal for the whole scene
-  (:class:`hybridneus.model.shading.SceneShading`);
+  through a sigmoid;
 - the NeuS sharpness is ``inv_s = exp(10 v)`` with a learned scalar ``v``;
-- the background is the dataset's constant colour or a learned one;
+- the background is the dataset's constant colour;
 - the crop cylinder of the scene preset (``x^2 + z^2 <= r^2``, ``y_min <= y <= y_max``) is
   kept in buffers: rendering scales opacity by a soft indicator of it, and the public
   :meth:`HybridField.sdf` returns ``max(sdf, crop_sdf)`` so meshes never leave it.
@@ -29,11 +24,10 @@ import torch
 from torch import nn
 
 from hybridneus.config import FieldConfig, GridConfig
+from hybridneus.data.crop import crop_sdf
 from hybridneus.errors import ConfigError
-from hybridneus.model.crop import VOLUME_BOX, crop_sdf, grid_box
 from hybridneus.model.eventneus import FlushedSoftplus, geometric_init_, make_mlp
 from hybridneus.model.protocol import as_points
-from hybridneus.model.shading import SceneShading
 
 
 def _make_position_encoding(grid: GridConfig) -> tuple[nn.Module, bool]:
@@ -99,14 +93,11 @@ class HybridField(nn.Module):
     ) -> None:
         super().__init__()
         self.grey = bool(grey)
-        from hybridneus.grids import FrequencyEncoding, HashGrid, SphericalHarmonics
+        from hybridneus.grids import FrequencyEncoding, SphericalHarmonics
 
         self.grid_config = grid
         self.field_config = field
         self.encoding, self._unit_cube = _make_position_encoding(grid)
-        # Saved with the weights: a checkpoint keeps the span it was trained on.
-        box = grid_box(crop, grid.domain, grid.domain_margin)
-        self.register_buffer("grid_box", torch.tensor(box, dtype=torch.float32))
         enc_dim = int(self.encoding.out_dim)
         self.sdf_net = make_mlp(
             3 + enc_dim,
@@ -122,49 +113,17 @@ class HybridField(nn.Module):
         self._center_sphere()
         self.sh = SphericalHarmonics(field.sh_degree)
         self.color_pe: nn.Module | None = None
-        self.shading: SceneShading | None = None
-        if field.shading_headlight and field.shading_degree == 0:
-            raise ConfigError("field.shading_headlight: needs field.shading_degree > 0")
-        if field.shading_degree != 0:  # 1 to 4, or SceneShading refuses it
-            self.shading = SceneShading(field.shading_degree, field.shading_headlight)
-        color_in = self.sh.out_dim + (3 if self.shading is None else 0) + field.feature_dim
-        self.color_encoding: nn.Module | None = None
-        if field.color_grid_levels < 0:
-            raise ConfigError(
-                f"field.color_grid_levels: must be >= 0, got {field.color_grid_levels}")
-        if field.color_grid_levels > 0:
-            if grid.kind == "frequency":
-                raise ConfigError("field.color_grid_levels: needs a grid encoding "
-                                  "(grid.kind hash or dense), not frequency")
-            self.color_encoding = HashGrid(
-                n_levels=field.color_grid_levels,
-                n_features_per_level=grid.n_features,
-                log2_hashmap_size=grid.log2_table_size,
-                base_resolution=grid.base_resolution,
-                finest_resolution=grid.max_resolution,
-            )
-            color_in += int(self.color_encoding.out_dim)
+        color_in = self.sh.out_dim + 3 + field.feature_dim
         if field.color_position_frequencies > 0:
             self.color_pe = FrequencyEncoding(field.color_position_frequencies, n_anneal=None)
             color_in += int(self.color_pe.out_dim)
-        if field.color_activation not in ("relu", "softplus"):
-            raise ConfigError(
-                f"field.color_activation: unknown {field.color_activation!r}; "
-                "expected relu or softplus"
-            )
-        act = nn.ReLU() if field.color_activation == "relu" else nn.Softplus()
-        self.color_net = make_mlp(color_in, field.color_hidden, field.color_layers, 3, (), act)
+        self.color_net = make_mlp(color_in, field.color_hidden, field.color_layers, 3, (),
+                                  nn.ReLU())
         background_rgb = torch.tensor([float(c) for c in background])
         self.variance = nn.Parameter(torch.tensor(float(field.inv_s_init)))
         self.register_buffer("crop", torch.tensor([float(c) for c in crop]))
         bg = background_rgb.clamp(1e-3, 1 - 1e-3)
         self.register_buffer("background_const", bg)
-        self.background_logit: nn.Parameter | None = None
-        if field.learned_background:
-            self.background_logit = nn.Parameter(torch.logit(bg))
-        self.cos_anneal = 1.0
-        if field.prefit_steps > 0:
-            self.prefit_sphere(field.prefit_steps)
 
     # ------------------------------------------------------------------ properties
 
@@ -180,8 +139,6 @@ class HybridField(nn.Module):
     def background(self) -> torch.Tensor:
         """Background RGB (3,) in [0, 1]."""
         bg = self.background_const
-        if self.background_logit is not None:
-            bg = torch.sigmoid(self.background_logit)
         return bg.mean().expand(3) if self.grey else bg
 
     # ------------------------------------------------------------------ schedules
@@ -211,18 +168,13 @@ class HybridField(nn.Module):
 
     # ------------------------------------------------------------------ core (torch)
 
-    def _grid_input(self, points: torch.Tensor) -> torch.Tensor:
-        """``points`` mapped from :attr:`grid_box` to the grids' unit cube."""
-        lo, hi = self.grid_box[:3], self.grid_box[3:]
-        return (points - lo) / (hi - lo)
-
     def sdf_and_features(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Raw SDF (n_points,) and geometric features (n_points, feature_dim).
 
         Note:
             Differentiable to second order in ``points`` (for the Eikonal term).
         """
-        enc_in = self._grid_input(points) if self._unit_cube else points
+        enc_in = (points + 1.0) * 0.5 if self._unit_cube else points
         h = torch.cat([points, self.encoding(enc_in).to(points.dtype)], dim=-1)
         out = self.sdf_net(h)
         return out[:, 0], out[:, 1:]
@@ -257,31 +209,12 @@ class HybridField(nn.Module):
         normals: torch.Tensor,  # (n, 3)
         features: torch.Tensor,  # (n, F)
     ) -> torch.Tensor:
-        """Colour head: RGB (n, 3), in [0, 1] unless the field is shaded.
-
-        Differentiable in all inputs, except ``features`` when the field has its own colour
-        grid (``field.color_grid_levels``). A shaded field (``field.shading_degree``) gives
-        the albedo in [0, 1] times its shading of ``normals``, which may exceed 1.
-        """
-        parts = [self.sh(dirs), features]
-        if self.shading is None:
-            parts.insert(1, normals)
-        if self.color_encoding is not None:
-            parts[-1] = features.detach()
-            parts.append(self.color_encoding(self._grid_input(points)).to(points.dtype))
+        """Colour head: RGB (n, 3) in [0, 1]. Differentiable in all inputs."""
+        parts = [self.sh(dirs), normals, features]
         if self.color_pe is not None:
             parts.append(self.color_pe(points))
         rgb = torch.sigmoid(self.color_net(torch.cat(parts, dim=-1)))
-        if self.shading is not None:
-            rgb = rgb * self.shade(normals, dirs)
         return rgb.mean(-1, keepdim=True).expand_as(rgb) if self.grey else rgb
-
-    def shade(self, normals: torch.Tensor, dirs: torch.Tensor | None = None) -> torch.Tensor:
-        """The scene's shading (n, 3) of normals (n, 3) seen along ``dirs`` (n, 3); ones for
-        a field without shading (``field.shading_degree = 0``)."""
-        if self.shading is None:
-            return torch.ones_like(normals)
-        return self.shading(normals, dirs)
 
     def crop_weight(self, points: torch.Tensor, softness: float) -> torch.Tensor:
         """Soft indicator (n,) of the crop cylinder: 1 inside, 0 beyond ``softness`` outside."""
@@ -364,9 +297,9 @@ class HybridField(nn.Module):
     def _load_from_state_dict(
         self, state_dict: dict[str, Any], prefix: str, *args: Any, **kwargs: Any
     ) -> None:
-        # Checkpoints written before grid.domain existed hold no grid_box: their grid
-        # spanned the whole volume.
-        state_dict.setdefault(prefix + "grid_box", torch.tensor(VOLUME_BOX))
+        # Checkpoints of hybridneus 0.2 hold the box the grid spanned; a run whose box was
+        # not the volume is refused with its config (grid.domain, removed in 0.3).
+        state_dict.pop(prefix + "grid_box", None)
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     # ------------------------------------------------------------------ init
@@ -384,18 +317,3 @@ class HybridField(nn.Module):
             self.encoding.update_step(0)
         offset = self.sdf_and_features(dirs * self.init_radius)[0].mean()
         self.sdf_net.layers[-1].bias[0] -= offset
-
-    def prefit_sphere(self, steps: int, n_points: int = 4096, seed: int = 0) -> float:
-        """Fit the SDF head to the initial sphere for ``steps`` Adam steps; return the MSE."""
-        gen = torch.Generator().manual_seed(seed)
-        params = list(self.encoding.parameters()) + list(self.sdf_net.parameters())
-        opt = torch.optim.Adam(params, lr=1e-3)
-        loss = torch.zeros(())
-        for _ in range(steps):
-            pts = (torch.rand(n_points, 3, generator=gen) * 2 - 1).to(self.device)
-            target = pts.norm(dim=-1) - self.init_radius
-            loss = ((self.sdf_and_features(pts)[0] - target) ** 2).mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-        return float(loss.detach())

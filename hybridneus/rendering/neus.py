@@ -26,7 +26,6 @@ def alpha_from_sdf(
     dir_dot_grad: torch.Tensor,  # (n_rays, n_samples)
     deltas: torch.Tensor,  # (n_rays, n_samples)
     inv_s: torch.Tensor | float,
-    cos_anneal: float = 1.0,
 ) -> torch.Tensor:
     r"""Discrete opacity of each interval from the SDF at its midpoint (NeuS, unbiased).
 
@@ -37,15 +36,13 @@ def alpha_from_sdf(
         \alpha_i = \max\Big(\frac{\Phi_s(f(t_i)) - \Phi_s(f(t_{i+1}))}{\Phi_s(f(t_i))}, 0\Big),
         \quad \Phi_s(x) = \mathrm{sigmoid}(s x).
 
-    The cosine is clamped to be non-positive (only surfaces entered from outside are opaque);
-    ``cos_anneal`` < 1 blends in the relaxed ``(cos - 1) / 2`` of NeuS early in training.
+    The cosine is clamped to be non-positive (only surfaces entered from outside are opaque).
 
     Args:
         sdf: SDF at the interval midpoints, (n_rays, n_samples).
         dir_dot_grad: ray direction dotted with the SDF gradient there, (n_rays, n_samples).
         deltas: interval lengths, (n_rays, n_samples).
         inv_s: NeuS sharpness s (scalar tensor or float).
-        cos_anneal: 1.0 for the plain estimator. Default: 1.0.
 
     Returns:
         alpha: opacities in [0, 1], (n_rays, n_samples).
@@ -53,9 +50,7 @@ def alpha_from_sdf(
     Note:
         Differentiable (and twice differentiable) in ``sdf``, ``dir_dot_grad`` and ``inv_s``.
     """
-    relaxed = torch.relu(-dir_dot_grad * 0.5 + 0.5)
-    strict = torch.relu(-dir_dot_grad)
-    iter_cos = -(relaxed * (1.0 - cos_anneal) + strict * cos_anneal)
+    iter_cos = -torch.relu(-dir_dot_grad)
     prev_sdf = sdf - iter_cos * deltas * 0.5
     next_sdf = sdf + iter_cos * deltas * 0.5
     prev_cdf = _cdf(prev_sdf * inv_s)

@@ -70,7 +70,7 @@ def render_rays(
         dot = (dirs_flat * grad).sum(dim=-1)
         crop = field.crop_weight(pts, crop_softness).view(n_rays, n_samples)
         alpha = crop * alpha_from_sdf(sdf.view(n_rays, n_samples), dot.view(n_rays, n_samples),
-                                      deltas, field.inv_s(), field.cos_anneal)
+                                      deltas, field.inv_s())
         weights = weights_from_alpha(alpha)
         color = composite(weights, rgb.view(n_rays, n_samples, 3), field.background())
         normals = torch.nn.functional.normalize(grad, dim=-1).view(n_rays, n_samples, 3)

@@ -136,9 +136,6 @@ class NeuSSampler:
         up_rounds: rounds at sharpness ``up_base_inv_s * 2**round``.
         occupancy: grid of cells that may hold the surface; ``None`` samples uniformly.
         n_march: occupancy look-ups per ray.
-        empty_share: share of the coarse samples spread evenly over the whole ray, occupied
-            or not, so that matter the field does not hold yet (a thin wire in front of a
-            body) is still sampled and can grow; 0 samples occupied space only.
         near_min: smallest start distance.
         chunk: points per no-grad SDF call.
 
@@ -157,10 +154,7 @@ class NeuSSampler:
         n_march: int = 128,
         near_min: float = 0.05,
         chunk: int = 65536,
-        empty_share: float = 0.0,
     ) -> None:
-        if not 0.0 <= empty_share <= 1.0:
-            raise ValueError(f"empty_share: expected a share in [0, 1], got {empty_share}")
         self.aabb = aabb
         self.n_coarse = n_coarse
         self.n_importance = n_importance
@@ -170,7 +164,6 @@ class NeuSSampler:
         self.n_march = n_march
         self.near_min = near_min
         self.chunk = chunk
-        self.empty_share = empty_share
 
     @property
     def n_samples(self) -> int:
@@ -205,9 +198,6 @@ class NeuSSampler:
             # Rays crossing no occupied cell fall back to uniform samples.
             empty = occupied.sum(dim=-1, keepdim=True) == 0
             occupied = torch.where(empty, torch.ones_like(occupied), occupied)
-            if self.empty_share > 0:
-                share = occupied / occupied.sum(dim=-1, keepdim=True)
-                occupied = (1 - self.empty_share) * share + self.empty_share / self.n_march
             t = sample_pdf(edges, occupied, self.n_coarse, jitter)
         else:
             steps = torch.arange(self.n_coarse, device=origins.device, dtype=origins.dtype)

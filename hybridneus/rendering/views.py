@@ -48,7 +48,7 @@ def inference_sampler(
     occupancy grid keeps them near the surface so that a 346x260 view stays affordable on a
     CPU.
     """
-    from hybridneus.model.crop import crop_aabb
+    from hybridneus.data.crop import crop_aabb
 
     aabb = crop_aabb(field.crop.detach().cpu()).to(field.device)
     grid = OccupancyGrid(aabb, occupancy_resolution).to(field.device)

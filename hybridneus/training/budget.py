@@ -1,33 +1,26 @@
 """A wall-clock budget (``--minutes``) turned into a number of steps before training, and
-re-planned during it when the steps run at another pace than measured.
+re-planned during it to the pace the steps actually run at.
 
 The schedules are fractions of training, so a fit must know its length before its first
-step. A step's cost depends on how far training is: a two-core CPU took 53 ms per step with
-4 of 16 grid levels open, 92 ms with all 16 and the curvature prior on, and 85 ms once that
-prior had faded. :func:`budget_steps` times a few steps at three points of the schedule (the
-start, where all levels are open, and near the end) on the trainer's own data, and then puts
-everything back (parameters, optimiser, random states), so the fit starts exactly as if it had
-not been probed. The step count is recorded in the run's ``scene.yaml``; ``--iters`` with it
-repeats the run's schedule on any machine.
+step. A step's cost depends on how far training is (a two-core CPU took 53 ms per step with 4
+of 16 grid levels open, 92 ms with all 16 and the curvature prior on, and 85 ms once that
+prior had faded), so :func:`budget_steps` times a few steps at three points of the schedule
+(the start, where all levels are open, and near the end) on the trainer's own data, and then
+puts everything back (parameters, optimiser, random states): the fit starts exactly as if it
+had not been probed.
 
-A fresh field is cheaper to step than a trained one (on a 2-core Intel Xeon, late steps of
-trained fields took 2 to 2.5 times the probe's time for the same number of samples, most of
-it on subnormal floats, which the field and renderer now hold at zero: docs/training.md),
-and a machine's speed drifts: on a 2-core AMD EPYC the probe's mean step varied by 6% to 13%
-(coefficient of variation) between probes a few seconds apart, with 5, 10 or 20 timed steps
-per point (docs/training.md), and more over a fit's minutes. Fits stopped at their deadline
-with 72-78% of their schedule done when the probe was too fast (the learning rate never
-decayed, the late priors never faded) and ended with up to 15% of the budget unused when it
-was too slow.
-:class:`BudgetPlan` therefore re-plans at a few points of training (``train.replan_at``): it
-compares the wall-clock time the last stretch of steps took with what the probe predicted
-for them and, if the rest would overrun, shortens the schedule to what the time left allows
-at the measured pace; with ``train.replan_lengthen`` it also lengthens a schedule that would
-end early. A re-plan changes the rate at which progress grows from that step on, not the
-progress reached (:class:`~hybridneus.training.schedules.Timeline`), so no schedule jumps.
-Each re-plan is logged and recorded in ``scene.yaml``; ``--iters`` with the final count
-follows the re-planned schedule's length but not its change of rate, so it repeats such a
-run closely rather than exactly.
+That first count is a guess. A trained field steps at another pace than the fresh one the
+probe timed, a machine's speed drifts, and other programs take the cores for a while and give
+them back. :class:`BudgetPlan` therefore re-plans all through the fit: every few seconds it
+compares the time the last stretch of steps took with what the probe predicted for them and
+resizes the schedule so that the steps left, at that pace, fill the time left. A machine that
+slows shortens the schedule, one that speeds up again lengthens it, and the fit ends at its
+deadline with its schedule done. A re-plan changes the rate at which progress grows from
+that step on, not the progress reached (:class:`~hybridneus.training.schedules.Timeline`),
+so warm-up, level opening and decay never jump. The count of re-plans and the range of paces
+go into ``scene.yaml``; ``--iters`` with the final step count follows the re-planned
+schedule's length but not its changes of rate, so it repeats such a run closely rather than
+exactly.
 """
 
 from __future__ import annotations
@@ -37,7 +30,7 @@ import logging
 import statistics
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from hybridneus.training.schedules import Timeline
 
@@ -94,14 +87,6 @@ def _full_at(trainer) -> float:
     return min(max(trainer.cfg.grid.opened_at, 0.0), LATE)
 
 
-def mean_step_seconds(first: float, full: float, late: float, refresh: float, full_at: float,
-                      occupancy_every: int) -> float:
-    """The mean cost of a step over a whole schedule, the cost interpolated linearly between
-    the probe points (0, ``first``), (``full_at``, ``full``), (``LATE``, ``late``) and held
-    after the last; one refresh every ``occupancy_every`` steps."""
-    return StepCosts(first, full, late, refresh, full_at, occupancy_every).mean(0.0)
-
-
 @dataclass
 class StepCosts:
     """The probe's seconds per step as a function of progress (see :func:`step_seconds`),
@@ -142,66 +127,71 @@ class StepCosts:
         return step + self.refresh / max(self.occupancy_every, 1) + self.overhead
 
 
+#: A re-plan's stretch: at least this share of the budget's training time (or a quarter of
+#: the time left, near the end) and this many steps, so that one slow step does not set it.
+REPLAN_SHARE = 0.02
+REPLAN_MIN_STEPS = 16
+
+
 @dataclass
 class BudgetPlan:
-    """Re-plans a budgeted fit's length when its steps run slower than the probe said (and,
-    with ``lengthen``, when they run faster).
+    """Re-plans a budgeted fit's length to the pace its steps run at.
 
-    Call :meth:`after_step` after every step; at each progress point of ``at`` it measures
-    the seconds the steps since the previous point took against the ``costs`` predicted for
-    them and, when the remaining steps at that pace would end after ``end`` (a ``clock()``
-    value), or with ``lengthen`` well before it, resizes the trainer's
+    Call :meth:`start` before the first step and :meth:`after_step` after every step. Once a
+    stretch of ``every`` seconds (or a quarter of the time left, whichever is shorter) and at
+    least :data:`REPLAN_MIN_STEPS` steps has passed, it measures the seconds the stretch took
+    against the ``costs`` predicted for it, and resizes the trainer's
     :class:`~hybridneus.training.schedules.Timeline` (and its scene record's ``steps``) to
-    what fits. The progress reached stays where it is: every schedule goes on from there at
-    the new rate, without a jump.
+    the steps that fit the time to ``end`` (a ``clock()`` value) at that pace. The progress
+    reached stays where it is: every schedule goes on from there at the new rate.
 
     Attributes:
-        replans: one line per re-plan that changed the schedule.
+        replans: how many re-plans changed the schedule's length.
+        paces: the slowest and the fastest stretch measured, as multiples of the probe's
+            time (``None`` before the first).
     """
 
     costs: StepCosts
     end: float
-    at: tuple[float, ...]
-    lengthen: bool = False
+    every: float
     clock: Callable[[], float] = time.perf_counter
-    replans: list[str] = field(default_factory=list)
+    replans: int = 0
+    paces: tuple[float, float] | None = None
     _mark: tuple[int, float, float] | None = None
-    _next: int = 0
 
     def start(self, step: int, p: float = 0.0) -> None:
         """Begin timing at ``step`` (the fit's first, at progress ``p``)."""
         self._mark = (step, self.clock(), p)
 
     def after_step(self, trainer) -> None:
-        """Re-plan if ``trainer`` has just passed the next point of ``at``."""
+        """Re-plan if the stretch since the last re-plan is long enough."""
         if self._mark is None:
             raise RuntimeError("BudgetPlan.start() was not called before the first step")
-        p = trainer.progress(trainer.step)
-        if self._next >= len(self.at) or p < self.at[self._next]:
-            return
-        while self._next < len(self.at) and p >= self.at[self._next]:
-            self._next += 1
-        now = self.clock()
+        if trainer.step >= trainer.total_steps:
+            return  # the schedule is done: the fit ends here
         step0, t0, p0 = self._mark
-        self._mark = (trainer.step, now, p)
+        now = self.clock()
+        left = self.end - now
         done = trainer.step - step0
-        if done <= 0:
+        if done < REPLAN_MIN_STEPS or now - t0 < min(self.every, max(left, 0.0) / 4.0):
             return
+        p = trainer.progress(trainer.step)
+        self._mark = (trainer.step, now, p)
         predicted = self.costs.mean(p0, p) * done
         pace = (now - t0) / predicted if predicted > 0 else 1.0
-        left = self.end - now
+        lo, hi = self.paces or (pace, pace)
+        self.paces = (min(lo, pace), max(hi, pace))
+        trainer.record.paces = [round(v, 3) for v in self.paces]
         rest = self.costs.mean(p) * pace * HEADROOM
-        total = trainer.total_steps
         fits = trainer.step + max(1, int(left / rest)) if left > 0 else trainer.step + 1
-        if fits == total or (fits > total and not self.lengthen):
+        if fits == trainer.total_steps:
             return
-        line = (f"re-planned at step {trainer.step}: {total} -> {fits} steps (the last "
-                f"{done} took {pace:.2f}x the probe's time)")
+        logging.getLogger("hybridneus").debug(
+            "re-planned at step %d: %d -> %d steps (the last %d took %.2fx the probe's time)",
+            trainer.step, trainer.total_steps, fits, done, pace)
         trainer.timeline.resize(trainer.step, fits)
         trainer.record.steps = fits
-        trainer.record.steps_from += f"; {line}"
-        self.replans.append(line)
-        logging.getLogger("hybridneus").info(line)
+        trainer.record.replans = self.replans = self.replans + 1
 
 
 def budget_steps(trainer, seconds: float,

@@ -13,9 +13,9 @@ from __future__ import annotations
 import torch
 
 from hybridneus.config import LossConfig
+from hybridneus.data.crop import crop_sdf
 from hybridneus.data.frames import FrameBatch
 from hybridneus.data.windows import RayBatch
-from hybridneus.model.crop import crop_sdf
 from hybridneus.training import losses as L
 from hybridneus.training.priors import Prior, RandomPoints, StepContext
 

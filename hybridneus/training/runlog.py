@@ -14,7 +14,7 @@ from hybridneus.config import save_config
 from hybridneus.fileio import atomic_path
 from hybridneus.training import runs
 
-#: The refined training poses of a ``refine.poses`` run (see :meth:`RunLogger.save_poses`).
+#: The training poses of a run that smoothed its track (see :meth:`RunLogger.save_poses`).
 POSES = "poses_refined.npz"
 _FIXED = ["step", "elapsed_s", "loss/total", "loss/event", "loss/eikonal"]
 
@@ -119,14 +119,14 @@ class RunLogger:
 
     def save_poses(self, trainer, refined) -> None:
         """``poses_refined.npz`` (``given`` and ``refined`` (n_views, 4, 4) camera-to-world,
-        ``views``: the view names) and ``previews/poses.png``, the size of each view's
-        correction."""
+        ``views``: the view names) and ``previews/poses.png``, how far smoothing moved each
+        view."""
         import numpy as np
 
-        from hybridneus.model.poses import pose_errors
+        from hybridneus.data.track import pose_errors
         from hybridneus.training.previews import write_pose_corrections
 
-        given = np.asarray(trainer.given_c2w, dtype=np.float64)
+        given = np.asarray(trainer.data.given_c2w, dtype=np.float64)
         with atomic_path(self.run_dir / POSES) as tmp:
             np.savez(tmp, given=given, refined=refined,
                      views=np.asarray(trainer.split.view_names))
@@ -147,7 +147,7 @@ class RunLogger:
         from hybridneus.training.scene import FILENAME
 
         self.checkpoint(trainer)
-        refined = trainer.refined_poses()
+        refined = trainer.trained_poses()
         if refined is not None:
             self.save_poses(trainer, refined)
         if trainer.stopped_early:

@@ -2,11 +2,12 @@
 
 The config is an input and is never written to. Everything a fit decides for itself goes
 here instead: the scene preset it used (with the values estimated from the events and how),
-the eps the loss eases from, the schedule's length (a ``--minutes`` budget turned into steps
-once, before the first step) and the pixels per step of the device. It is printed when the
+the eps the loss eases from, the window the training track was smoothed over, the schedule's
+length (a ``--minutes`` budget turned into steps before the first step, and re-planned to the
+machine's pace during the fit) and the pixels per step of the device. It is printed when the
 fit starts, saved beside ``config.yaml``, and read back on ``--resume``, which estimates
 nothing again. ``hybridneus fit DATA --iters <steps>`` with the same config repeats a budgeted
-run's schedule exactly.
+run's schedule (exactly where it was never re-planned).
 """
 
 from __future__ import annotations
@@ -42,10 +43,14 @@ class SceneRecord:
         eps_start: the tonemap eps the loss eases from (``estimate.eps_ease``), or ``None``.
         steps: the schedule's length.
         steps_from: how ``steps`` was chosen (``train.iters``, or the budget and the speed).
+        replans: how many times a budgeted fit re-planned its length to the pace of its
+            steps (:class:`~hybridneus.training.budget.BudgetPlan`).
+        paces: the slowest and fastest pace its re-plans measured, as multiples of the
+            probe's time, or ``None``.
         n_rays: pixels per step.
         device: the device trained on.
-        stopped_at: the step a budgeted fit stopped at because the machine ran slower than
-            its probe measured (the schedule still counts ``steps``); ``None``: it ran them all.
+        stopped_at: the step a budgeted fit stopped at because its deadline came before the
+            schedule's end (the schedule still counts ``steps``); ``None``: it ran them all.
         pose_window: the views the training track was smoothed over where the fit chose
             them from the track (``refine.pose_smoothing=-1``; 0: too short to smooth),
             else ``None``.
@@ -65,6 +70,8 @@ class SceneRecord:
     version: str = ""
     stopped_at: int | None = None
     pose_window: int | None = None
+    replans: int = 0
+    paces: list[float] | None = None
 
     def preset_overrides(self) -> dict[str, Any]:
         """The preset values to give the dataset reader so that it uses this record's."""
@@ -84,6 +91,10 @@ class SceneRecord:
         out.append(crop + _how(self.estimated.get("crop_r")))
         out.append(f"  {self.steps} steps ({self.steps_from}), {self.n_rays} pixels per step "
                    f"on {self.device}")
+        if self.replans:
+            lo, hi = self.paces or (1.0, 1.0)
+            out.append(f"  re-planned {self.replans} times to the pace of its steps ({lo:.2f}x "
+                       f"to {hi:.2f}x the probe's time)")
         if self.pose_window is not None:
             out.append(f"  training poses smoothed over {self.pose_window} views (chosen from "
                        "the track)" if self.pose_window else

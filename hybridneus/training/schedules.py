@@ -95,18 +95,6 @@ def geometric(p: float, start: float, end: float, at: float) -> float:
     return start * (end / start) ** min(1.0, p / at)
 
 
-def head_rate(p: float, start: float, until: float) -> float:
-    """The SDF head's learning rate as a share of the field's at ``p``: ``start``, rising
-    geometrically to 1 at ``until`` and held there; ``start`` throughout when ``until <= 0``.
-
-    Fields empty in the opening steps (docs/accuracy.md, "Why a field empties"); a head slowed
-    only there learns at the field's rate for the rest of the fit.
-    """
-    if until <= 0:
-        return start
-    return geometric(p, start, 1.0, until)
-
-
 def sharpness_floor(
     p: float, start: float, floor: float, at: float, delay: float = 0.0, blend: float = 0.0
 ) -> float:
@@ -140,20 +128,3 @@ def fading(p: float, end: float) -> float:
         return 1.0
     return max(0.0, 1.0 - p / end)
 
-
-#: Share of training over which ``render.empty_share`` fades out after ``empty_share_until``.
-EMPTY_SHARE_FADE = 0.1
-
-
-def empty_share(p: float, share: float, until: float) -> float:
-    """The share of coarse samples spread over the whole ray at ``p``: ``share`` until
-    ``until``, then falling linearly to 0 over :data:`EMPTY_SHARE_FADE` (``share``
-    throughout when ``until >= 1``).
-
-    Samples spread over empty space let lost matter grow back, which happens in the middle
-    of a fit; at its end they are samples taken away from the surface the field holds
-    (docs/accuracy.md, "Samples where the occupancy grid sees nothing").
-    """
-    if until >= 1.0:
-        return share
-    return share * (1.0 - ramp(p, until, EMPTY_SHARE_FADE))

@@ -37,11 +37,6 @@ def trainer_state(trainer) -> dict[str, Any]:
         "frame_rng": None if trainer.frames is None
         else _primitive(trainer.frames.rng.bit_generator.state),
         "priors": {p.name: p.state_dict() for p in trainer.priors},
-        "poses": None if trainer.poses is None else trainer.poses.delta.detach().cpu().clone(),
-        "pose_clock": None if trainer.poses is None or trainer.poses.clock is None
-        else trainer.poses.clock.detach().cpu().clone(),
-        "pose_optimizer": None if trainer.pose_optimizer is None
-        else trainer.pose_optimizer.state_dict(),
         "scene": _scene(trainer),
         "config": trainer.cfg.to_dict(),
     }
@@ -67,13 +62,6 @@ def load_trainer_state(trainer, state: dict[str, Any]) -> None:
     trainer.windows.rng.bit_generator.state = state["window_rng"]
     if trainer.frames is not None and state.get("frame_rng") is not None:
         trainer.frames.rng.bit_generator.state = state["frame_rng"]
-    if trainer.poses is not None and state.get("poses") is not None:
-        with torch.no_grad():
-            trainer.poses.delta.copy_(state["poses"])
-            if trainer.poses.clock is not None and state.get("pose_clock") is not None:
-                trainer.poses.clock.copy_(state["pose_clock"])
-        if state.get("pose_optimizer") is not None:
-            trainer.pose_optimizer.load_state_dict(state["pose_optimizer"])
     trainer.step = int(state["step"])
     trainer.timeline = timeline(state)
     trainer.elapsed = float(state.get("elapsed", 0.0))
@@ -97,12 +85,8 @@ def position(state: dict[str, Any]) -> float:
 
 
 def _scene(trainer) -> dict[str, Any]:
-    """The scene record; with refined poses, meshing's camera centres are the refined ones."""
-    scene = dict(trainer.scene)
-    refined = trainer.refined_poses()
-    if refined is not None:
-        scene["cameras"] = refined[:, :3, 3].astype(float).tolist()
-    return scene
+    """What meshing needs of the scene (:attr:`Trainer.scene`)."""
+    return dict(trainer.scene)
 
 
 def _primitive(value: Any) -> Any:

@@ -3,13 +3,13 @@
 One :class:`Trainer` owns the field, the samplers, the optimiser, the priors and every random
 state, so that :meth:`Trainer.state_dict` / :meth:`Trainer.load_state_dict` resume a run
 exactly (:mod:`hybridneus.training.state`). What it trains on is fixed before it is built:
-the config (an input) and the scene record (what the fit estimated, the schedule's length,
-the pixels per step; :mod:`hybridneus.training.scene`).
+the config (an input), the prepared data (:class:`hybridneus.data.estimate.TrainingData`:
+the split as trained on, the hull's free space) and the scene record (what the fit
+estimated, the schedule's length, the pixels per step; :mod:`hybridneus.training.scene`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -20,10 +20,11 @@ from typing import Any
 import torch
 
 from hybridneus.config import Config
+from hybridneus.data.crop import crop_aabb
+from hybridneus.data.estimate import TrainingData
 from hybridneus.data.frames import FrameBatch
-from hybridneus.data.windows import RayBatch, concat_batches
+from hybridneus.data.windows import RayBatch
 from hybridneus.errors import RunError
-from hybridneus.model.crop import crop_aabb
 from hybridneus.model.field import HybridField
 from hybridneus.rendering.occupancy import OccupancyGrid
 from hybridneus.rendering.renderer import render_rays
@@ -39,19 +40,11 @@ log = logging.getLogger("hybridneus")
 
 
 def make_optimizer(field: HybridField, cfg: Config) -> torch.optim.Adam:
-    """Adam over the field, the NeuS variance in a group of its own learning rate, and the
-    SDF head in one of its own when ``train.lr_sdf_head`` is not 1."""
+    """Adam over the field, the NeuS variance in a group of its own learning rate."""
     t = cfg.train
-    own_head = t.lr_sdf_head != 1.0
-    in_head = {id(q) for q in field.sdf_net.parameters()} if own_head else set()
-    others, head = [], []
-    for name, q in field.named_parameters():
-        if name != "variance":
-            (head if id(q) in in_head else others).append(q)
+    others = [q for name, q in field.named_parameters() if name != "variance"]
     groups = [{"params": others, "lr": t.lr, "name": "field"},
               {"params": [field.variance], "lr": t.lr_variance, "name": "variance"}]
-    if own_head:
-        groups.append({"params": head, "lr": t.lr * t.lr_sdf_head, "name": "sdf_head"})
     kwargs = dict(betas=tuple(cfg.train.betas), eps=cfg.train.adam_eps)
     try:
         return torch.optim.Adam(groups, fused=True, **kwargs)
@@ -64,8 +57,8 @@ class Trainer:
 
     Args:
         cfg: the full configuration (read only).
-        dataset: an :class:`hybridneus.data.EventDataset` whose preset holds the values of
-            ``record`` (see :func:`hybridneus.api.prepare`).
+        data: the prepared data (:func:`hybridneus.data.estimate.training_data`), whose
+            dataset's preset holds the values of ``record`` (see :func:`hybridneus.api.prepare`).
         record: the scene record: schedule length, pixels per step, the eps to ease from.
         device: torch device.
 
@@ -76,34 +69,23 @@ class Trainer:
         total_steps: the schedule's length (:attr:`timeline`'s ``total``).
         timeline: progress by step (:class:`~hybridneus.training.schedules.Timeline`); a
             budget re-plan changes its length without moving the progress reached.
-        deadline: a ``time.perf_counter()`` value by which :meth:`fit` stops (a wall-clock
-            budget), or ``None``.
-        plan: a :class:`~hybridneus.training.budget.BudgetPlan` that may re-plan the length
-            of a budgeted fit running at another pace than probed, or ``None``.
+        clock: the wall clock the deadline is read from (``time.perf_counter``).
+        deadline: a :attr:`clock` value by which :meth:`fit` stops (a wall-clock budget), or
+            ``None``.
+        plan: a :class:`~hybridneus.training.budget.BudgetPlan` that re-plans the length of a
+            budgeted fit to the pace its steps run at, or ``None``.
         interrupted: set when :meth:`fit` stopped on KeyboardInterrupt.
         stopped_early: set when :meth:`fit` stopped at the deadline before the last step.
     """
 
-    def __init__(self, cfg: Config, dataset, record: SceneRecord,
+    def __init__(self, cfg: Config, data: TrainingData, record: SceneRecord,
                  device: torch.device | str = "cpu") -> None:
         from hybridneus.data import EventWindowSampler
 
-        self.cfg, self.record = cfg, record
+        self.cfg, self.record, self.data = cfg, record, data
         self.device = torch.device(device)
-        self.dataset = dataset
-        self.split = dataset[cfg.data.split]
-        self.given_c2w = self.split.c2w  # the poses as the data states them
-        if cfg.refine.pose_smoothing:
-            from hybridneus.data.track import choose_window, smooth_track
-
-            window, order = cfg.refine.pose_smoothing, cfg.refine.pose_smoothing_order
-            if window < 0:
-                window = record.pose_window = choose_window(self.split.c2w, order)
-            self.split = dataclasses.replace(
-                self.split, c2w=smooth_track(self.split.c2w, window, order))
-        self.preset = dataset.preset
-        if cfg.train.threads > 0:
-            torch.set_num_threads(cfg.train.threads)
+        self.split = data.split
+        self.preset = data.dataset.preset
         torch.manual_seed(cfg.train.seed)
         p = self.preset
         self.scene = {
@@ -111,7 +93,7 @@ class Trainer:
             "crop": [float(p.crop_r), float(p.crop_y_min), float(p.crop_y_max)],
             "tonemap_eps": float(p.tonemap_eps),
             "grey": p.mosaic == "mono",  # a monochrome sensor: the field renders grey
-            "frame": _recording_frame(dataset),  # meshes go back to a recording's own frame
+            "frame": data.frame,  # meshes go back to a recording's own frame
             # where the cameras stood: meshing fills the space none of them saw
             "cameras": self.split.c2w[:, :3, 3].astype(float).tolist(),
         }
@@ -125,11 +107,10 @@ class Trainer:
             self.aabb, n_coarse=r.n_coarse, n_importance=r.n_importance,
             up_rounds=r.up_rounds, up_base_inv_s=r.up_base_inv_s,
             occupancy=self.occupancy if r.occupancy else None, n_march=r.occupancy_march,
-            near_min=r.near_min, chunk=r.chunk, empty_share=r.empty_share,
+            near_min=r.near_min, chunk=r.chunk,
         )
         self.windows = EventWindowSampler(self.split, self.preset, seed=cfg.train.seed,
-                                          window=cfg.train.window, device=self.device,
-                                          view_balance=cfg.train.view_balance)
+                                          window=cfg.train.window, device=self.device)
         self.frames = None
         if cfg.train.supervision == "rgb":
             from hybridneus.data.frames import FrameRaySampler
@@ -141,22 +122,12 @@ class Trainer:
         # the rates the schedule scales (a loaded optimizer state brings its last ones)
         self.base_lrs = [g["lr"] for g in self.optimizer.param_groups]
         self.params = [q for g in self.optimizer.param_groups for q in g["params"]]
-        self.poses = self.pose_optimizer = None  # refine.poses: learned pose corrections
-        if cfg.refine.poses:
-            from hybridneus.model.poses import PoseCorrections, PoseOptimizer
-
-            rf = cfg.refine
-            self.poses = PoseCorrections(
-                self.split.n_views, rf.pose_knots,
-                self.split.c2w if rf.clock_offset else None,
-                self.split.c2w if rf.pose_gauge else None).to(self.device)
-            self.pose_optimizer = PoseOptimizer(self.poses, rf.pose_lr, tuple(cfg.train.betas))
-            self.params.extend(self.poses.parameters())
-        self.priors = build_priors(cfg, self.field, self.split, self.aabb, self.device)
+        self.priors = build_priors(cfg, self.field, data.free_space, self.aabb)
         self.objective = Objective(cfg.loss, self.priors, self.aabb)
         self.step = 0
         self.timeline = schedules.Timeline(max(1, record.steps))
         self.elapsed = 0.0
+        self.clock: Callable[[], float] = time.perf_counter
         self.deadline: float | None = None
         self.plan = None
         self.interrupted = self.stopped_early = False
@@ -200,14 +171,11 @@ class Trainer:
             self.occupied_fraction = self.occupancy.update(
                 self.field.raw_sdf, float(self.field.inv_s().detach()), r.occupancy_band, r.chunk)
 
-    def next_batch(self) -> list[RayBatch] | FrameBatch:
-        """The step's pixels: those of ``train.windows_per_step`` event windows (one batch
-        each), or (RGB supervision) a frame's."""
+    def next_batch(self) -> RayBatch | FrameBatch:
+        """The step's pixels: those of one event window, or (RGB supervision) a frame's."""
         if self.frames is not None:
             return self.frames.sample(2 * self.record.n_rays)
-        return [b.to(self.device) for b in
-                self.windows.sample_windows(self.record.n_rays,
-                                            self.cfg.train.windows_per_step)]
+        return self.windows.sample(self.record.n_rays).to(self.device)
 
     def _set_learning_rate(self) -> float:
         t = self.cfg.train
@@ -215,19 +183,9 @@ class Trainer:
         factor = schedules.lr_factor(p_end, t.warmup, t.decay_start, t.decay_final)
         for prior in self.priors:
             factor *= prior.lr_scale(self)
-        # the head's group was made at train.lr * lr_sdf_head: rescale it to the share due now
-        head = schedules.head_rate(p_end, t.lr_sdf_head, t.lr_sdf_head_until) / t.lr_sdf_head
         for group, base in zip(self.optimizer.param_groups, self.base_lrs, strict=True):
-            group["lr"] = base * factor * (head if group.get("name") == "sdf_head" else 1.0)
-        if self.pose_optimizer is not None:
-            self.pose_optimizer.set_lr(self.cfg.refine.pose_lr * factor)
+            group["lr"] = base * factor
         return factor
-
-    def _poses_learn(self) -> bool:
-        """Whether this step moves the poses: not before ``refine.pose_start``, while the
-        field is still mostly noise that early corrections would chase."""
-        p_end = self.progress(self.step + 1)
-        return self.poses is not None and p_end > self.cfg.refine.pose_start
 
     def train_step(self) -> dict[str, float]:
         """Run one optimisation step; return the logged scalars."""
@@ -236,52 +194,27 @@ class Trainer:
         p = self.progress(self.step)
         factor = self._set_learning_rate()
         self.field.update_step(self.timeline.position(self.step), self.total_steps)
-        anneal = cfg.render.cos_anneal_at
-        self.field.cos_anneal = 1.0 if anneal <= 0 else min(1.0, p / anneal)
-        self.sampler.empty_share = schedules.empty_share(p, cfg.render.empty_share,
-                                                         cfg.render.empty_share_until)
         if self.step % max(cfg.render.occupancy_every, 1) == 0:
             self.refresh_occupancy()
         batch = self.next_batch()
-        learn_poses = self._poses_learn()
-        views: list[float] = []
-        if isinstance(batch, list):
-            views = [v for b in batch for v in (b.view0, b.view1)]
-            if self.poses is not None:
-                # Rays that carry a gradient to the corrections make the backward pass
-                # compute the grid's gradient at every sample point too: only while the
-                # poses learn.
-                with torch.set_grad_enabled(learn_poses):
-                    batch = [self._corrected(b) for b in batch]
-            batch = concat_batches(batch)
         origins, dirs = batch_rays(batch)
         out = render_rays(self.field, origins, dirs, self.sampler, self.generator, True,
                           cfg.render.crop_softness)
         ctx = StepContext(self.field, out, origins, dirs, p, self.generator, batch)
         terms = self.objective(ctx, batch, self.tonemap_eps())
-        if self.poses is not None and views:
-            with torch.set_grad_enabled(learn_poses):
-                terms["pose"] = (cfg.refine.pose_weight,
-                                 self.poses.regulariser(views))
         total = sum(weight * value for weight, value in terms.values())
         self.optimizer.zero_grad(set_to_none=True)
         # Only the trained parameters: the sample points are leaves that require grad (for
         # the Eikonal term's d sdf / dx), and a plain backward() would also compute their
         # gradient, through the grid's interpolation weights, for nothing.
-        resting = [] if learn_poses or self.poses is None else list(self.poses.parameters())
-        total.backward(inputs=[q for q in self.params
-                               if q.requires_grad and not any(q is r for r in resting)])
+        total.backward(inputs=[q for q in self.params if q.requires_grad])
         self.optimizer.step()
-        if self.pose_optimizer is not None:
-            self.pose_optimizer.step(learn_poses)
         for prior in self.priors:
             prior.after_update(self, p)
         self.step += 1
         scalars = {f"loss/{k}": v for k, (_, v) in terms.items()}
         scalars.update({"loss/total": total, "inv_s": self.field.inv_s(),
                         "opacity": out.opacity.mean()})
-        if self.poses is not None and self.poses.clock is not None:
-            scalars["clock_offset"] = self.poses.clock  # views, poses against events
         # One device-to-host copy for all of them: on a GPU each float() would wait for the
         # device. The copy also ends the step's GPU work, so step_seconds counts it.
         values = torch.stack([v.detach().float().reshape(()) for v in scalars.values()])
@@ -294,18 +227,10 @@ class Trainer:
                      "occupied": self.occupied_fraction, "step_seconds": seconds})
         return logs
 
-    def _corrected(self, batch: RayBatch) -> RayBatch:
-        """The batch's rays moved onto the corrected poses (differentiably)."""
-        o0, d0 = self.poses.move_rays(batch.origins0, batch.dirs0, batch.rot0, batch.view0)
-        o1, d1 = self.poses.move_rays(batch.origins1, batch.dirs1, batch.rot1, batch.view1)
-        return dataclasses.replace(batch, origins0=o0, dirs0=d0, origins1=o1, dirs1=d1)
-
-    def refined_poses(self):
-        """(n_views, 4, 4) training poses as trained (smoothed, with the learned corrections),
-        or ``None`` when the fit used them as given."""
-        if self.poses is not None:
-            return self.poses.corrected(self.split.c2w)
-        return self.split.c2w if self.cfg.refine.pose_smoothing else None
+    def trained_poses(self):
+        """(n_views, 4, 4) training poses as trained where they differ from the data's (a
+        smoothed track), or ``None``."""
+        return self.split.c2w if self.data.smoothed else None
 
     # ------------------------------------------------------------------ loop
 
@@ -334,7 +259,7 @@ class Trainer:
                 self.plan.start(self.step, self.progress(self.step))
             try:
                 while self.step < self.total_steps:
-                    if self.deadline is not None and time.perf_counter() >= self.deadline:
+                    if self.deadline is not None and self.clock() >= self.deadline:
                         self.stopped_early = True
                         log.warning("stopped at step %d of %d: the time budget ran out (the "
                                     "machine ran slower than measured at the start)",
@@ -370,12 +295,3 @@ def _restores(trainer) -> int:
 def default_scene_name(path: str | Path) -> str:
     """Run-folder prefix from a dataset path (its last component)."""
     return Path(path).resolve().name or "scene"
-
-
-def _recording_frame(dataset) -> dict | None:
-    """The converted recording's frame (``scene.json``), as saved with the checkpoint."""
-    from hybridneus.recordings.frame import read_scene_frame
-
-    root = getattr(dataset, "root", None)
-    frame = read_scene_frame(root) if root is not None else None
-    return frame.to_json() if frame is not None else None

@@ -18,26 +18,24 @@ from hybridneus.config import Config
 from hybridneus.training.priors.base import Prior, RandomPoints, StepContext
 from hybridneus.training.priors.collapse import CollapseGuard
 from hybridneus.training.priors.curvature import CurvaturePrior
-from hybridneus.training.priors.hull import HullPrior, free_space_of
+from hybridneus.training.priors.hull import HullPrior
 from hybridneus.training.priors.sharpness import SharpnessCeiling, SharpnessFloor
 
 
-def build_priors(cfg: Config, field, split, aabb, device) -> list[Prior]:
+def build_priors(cfg: Config, field, free_space, aabb) -> list[Prior]:
     """The priors ``cfg.priors`` enables, in the order their hooks run.
 
     Args:
         cfg: the fit's config.
         field: the field being trained (fresh: the guard's first restore point).
-        split: the training split (the hull prior outlines its events).
+        free_space: the hull's free space (:class:`hybridneus.data.hull.FreeSpace`, prepared
+            with the data), or ``None``: no hull prior.
         aabb: (6,) the crop box.
-        device: where the priors' tensors live.
     """
     p = cfg.priors
     out: list[Prior] = []
-    if p.hull.enabled:
-        free = free_space_of(split, aabb, p.hull, device)
-        if free is not None:
-            out.append(HullPrior(p.hull, free))
+    if p.hull.enabled and free_space is not None:
+        out.append(HullPrior(p.hull, free_space))
     if p.curvature.enabled:
         out.append(CurvaturePrior(p.curvature))
     if p.sharpness_floor.enabled:

@@ -4,9 +4,8 @@
 A flat face of one colour fires events only along its outline, so the data leave its inside
 free to wrinkle. The term is the mean squared change of the unit normal between each rendered
 surface point (the expected depth of a ray that hits, opacity > 0.5) and a copy shifted by
-``step`` in a random direction; its weight falls linearly to 0 by ``end`` of training. Rays
-through pixels that fired in the event window count ``event_weight`` against 1 for silent
-ones. The gradients it evaluates join the Eikonal term.
+``step`` in a random direction; its weight falls linearly to 0 by ``end`` of training. The
+gradients it evaluates join the Eikonal term.
 """
 
 from __future__ import annotations
@@ -55,15 +54,4 @@ class CurvaturePrior(Prior):
         _, grad, _ = ctx.field.sdf_gradient_features(torch.cat([points, shifted]), True)
         ctx.eikonal.append((grad, torch.cat([hit, hit])))
         grad_p, grad_s = grad.chunk(2)
-        return {"curvature": (weight, L.curvature_loss(grad_p, grad_s,
-                                                       hit * self.ray_weights(ctx)))}
-
-    def ray_weights(self, ctx: StepContext) -> torch.Tensor | float:
-        """Per ray, 1 where the pixel was silent in the event window and ``event_weight``
-        where it fired (1 for every ray of a frame batch)."""
-        target = getattr(ctx.batch, "target", None)
-        if self.cfg.event_weight == 1.0 or target is None:
-            return 1.0
-        fired = (target != 0).to(ctx.origins.dtype)
-        w = 1.0 - (1.0 - self.cfg.event_weight) * fired
-        return w.repeat(len(ctx.origins) // len(w))  # both window ends see the same pixels
+        return {"curvature": (weight, L.curvature_loss(grad_p, grad_s, hit))}

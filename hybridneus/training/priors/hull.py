@@ -5,18 +5,16 @@ background, such as the space under a flat object seen from above, costs no even
 fits fill it. Views near the horizon do see that space against the background, and the hull
 of the event silhouettes (:mod:`hybridneus.data.hull`) records it as empty. The term is
 ``relu(-sdf)`` at the random volume points the hull calls free, its weight growing from 0
-over ``ramp`` of training.
+over ``ramp`` of training. The free space is outlined with the data, before the trainer is
+built (:func:`hybridneus.data.estimate.training_data`).
 """
 
 from __future__ import annotations
 
-import logging
-
-import numpy as np
 import torch
 
 from hybridneus.config import HullPrior as HullConfig
-from hybridneus.data.hull import NOTHING_OUTLINED, FreeSpace, event_free_space
+from hybridneus.data.hull import FreeSpace
 from hybridneus.training import losses as L
 from hybridneus.training.priors.base import Prior, StepContext
 from hybridneus.training.schedules import ramp
@@ -27,7 +25,7 @@ class HullPrior(Prior):
 
     Args:
         cfg: ``priors.hull``.
-        free_space: the hull's free space over the crop box (:func:`free_space_of`).
+        free_space: the hull's free space over the crop box.
     """
 
     name = "hull"
@@ -44,17 +42,3 @@ class HullPrior(Prior):
         r = ctx.random
         free = self.free_space.free(r.points) & ~r.outside
         return {"hull": (weight, L.outside_loss(r.sdf, free))}
-
-
-def free_space_of(split, aabb: torch.Tensor, cfg: HullConfig, device) -> FreeSpace | None:
-    """The events' free space over the box ``aabb`` (6,), or ``None`` (logged) when the events
-    outline nothing."""
-    lo, hi = (a.cpu().numpy().astype(np.float64) for a in (aabb[:3], aabb[3:]))
-    free = event_free_space(split, lo, hi, cfg.resolution, device=device)
-    log = logging.getLogger("hybridneus")
-    if free is None:
-        log.info(f"hull: {NOTHING_OUTLINED}; no hull prior")
-    else:
-        log.info(f"hull: the events' visual hull calls {free.free_fraction:.0%} of the crop box "
-                 "empty (priors.hull)")
-    return free

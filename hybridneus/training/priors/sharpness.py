@@ -58,10 +58,6 @@ class SharpnessCeiling(Prior):
     clamping ``inv_s`` in the renderer) also keeps ``v`` where its gradient lives: the
     field's own clamp at 1e6 would leave a runaway ``v`` without one, for good.
 
-    With ``follow_levels`` the bound is scaled by the finest active level's resolution over
-    the finest level's while coarse-to-fine opens levels (a frequency encoding has no levels
-    and keeps the full bound).
-
     Args:
         cfg: ``priors.sharpness_ceiling``.
         cell: the finest grid cell's size (world units).
@@ -71,17 +67,7 @@ class SharpnessCeiling(Prior):
 
     def __init__(self, cfg: CeilingConfig, cell: float) -> None:
         self.ceiling = cfg.per_cell / cell
-        self.follow_levels = cfg.follow_levels
-
-    def bound(self, field) -> float:
-        """The ceiling on ``inv_s`` for ``field``'s open levels."""
-        levels = getattr(field.encoding, "levels", None)
-        if not self.follow_levels or not levels:
-            return self.ceiling
-        # scale + 1 is a level's resolution before tiny-cuda-nn's rounding up
-        finest_open = levels[field.active_levels() - 1].scale + 1.0
-        return self.ceiling * finest_open / (levels[-1].scale + 1.0)
 
     def after_update(self, trainer, p: float) -> None:
         with torch.no_grad():
-            trainer.field.variance.clamp_(max=math.log(self.bound(trainer.field)) / 10.0)
+            trainer.field.variance.clamp_(max=math.log(self.ceiling) / 10.0)
