@@ -27,8 +27,8 @@ CODE = ("hybridneus", "grids", "cli", "benchmarks", ":(exclude)benchmarks/result
         "pyproject.toml")
 
 
-#: A copy of the tree without its git history (a lent GPU machine gets one) names its commit
-#: here; whoever sets it vouches that the copy is that commit, unchanged.
+#: A copy of the tree without its git history (on another machine) names its commit here;
+#: whoever sets it vouches that the copy is that commit, unchanged.
 COMMIT_VARIABLE = "HYBRIDNEUS_BENCH_COMMIT"
 
 
@@ -158,3 +158,35 @@ def read_lines(path: Path) -> list[dict[str, Any]]:
     if not path.is_file():
         return []
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def settings_of(line: dict[str, Any]) -> list[str]:
+    """The ``key=value`` config settings a result line was made with: a suite line's variant
+    (``fast+train.lr=0.02``, ``fast priors.hull.enabled=false``) and overrides, a pose line's
+    smoothing settings."""
+    parts = [p for chunk in str(line.get("preset", "")).split() for p in chunk.split("+")]
+    found = [p for p in parts if "=" in p]
+    found += [s for s in line.get("overrides") or [] if "=" in s]
+    found += [s for s in line.get("refine_sets") or [] if "=" in s]
+    return list(dict.fromkeys(found))
+
+
+def reruns_today(line: dict[str, Any]) -> bool:
+    """Whether today's software can repeat a result line: none of its settings is a key of an
+    experiment removed from the config (``REMOVED_KEYS``) at another value than the default it
+    had, which is what the software does now. Such lines stay in the results files (history)
+    and out of docs/benchmarks.md."""
+    import yaml
+
+    from hybridneus.config.overrides import REMOVED_KEYS
+
+    for setting in settings_of(line):
+        key, _, text = setting.partition("=")
+        if key in REMOVED_KEYS:
+            try:
+                value = yaml.safe_load(text)
+            except yaml.YAMLError:
+                return False
+            if value != REMOVED_KEYS[key][0]:
+                return False
+    return True

@@ -10,7 +10,7 @@ positive outside (a bulged or thickened one). In the dataset's units; meant for 
 generated objects, whose faces are the axis directions.
 
     python benchmarks/face_errors.py gen-box-1829338325 --commit 89b9b42 --seed 1 \\
-        --presets fast fast+priors.curvature.event_weight=0.2
+        --presets fast fast+priors.curvature.end=0
 """
 
 from __future__ import annotations

@@ -1,75 +1,77 @@
 #!/usr/bin/env bash
-# Every GPU check, in one call of under 10 minutes, the most important first (a call that runs
-# out of time still returns what is done):
-#   1. budgeted fits (`fast`, the device's batch) of the packed datasets, snapshots kept;
-#   2. the CUDA tests that need no meshing libraries (pytest -m gpu);
-#   3. operations, read-backs and time per training step, hash grid joined and per level;
-#   4. grid encoding speed, joined against per level.
+# The GPU checks, for any machine with a CUDA GPU and this repository installed
+# (pip install -e ".[test]" with a CUDA build of torch):
+#   1. the CUDA tests (pytest -m gpu);
+#   2. a budgeted fit of each DATASET (`fast`, the device's batch, MINUTES minutes), scored
+#      against its ground truth where the meshing libraries are installed, else kept for
+#      `python benchmarks/run_suite.py --score-runs RUN... --cache CACHE` on a machine that has
+#      them;
+#   3. operations, read-backs and time per training step (bench_launches.py);
+#   4. grid encoding speed, the levels gathered per level against joined (bench_grids.py).
+# Every result line names the GPU. They go to benchmarks/results/ (OUT=FOLDER: there instead),
+# and the log to $LOG (default: gpu_check.log in OUT, or in the current folder).
 #
-# Here:   python benchmarks/gpu_pack.py --out gpu_carry DATASET...   (a clean tree: it writes
-#         the commit into gpu_carry/COMMIT), then run with carry ["gpu_carry"]:
-# There:  bash benchmarks/gpu_check.sh gpu_carry          (MINUTES=1 by default)
-# Back:   python benchmarks/gpu_pack.py --unpack FILES_AT --out RUNS, which scores the fits
-#         and adds every line to benchmarks/results/.
-# The GPU machine has no network and no Open3D / pymeshlab / trimesh: the package installs
-# without dependencies (or runs from a tree of links laid out as pyproject.toml maps it), and
-# nothing there meshes. At most 8 files come back: session.log, gpu.jsonl and per fit a tar of
-# its small files and two snapshots (13 MB each). DEVICE=cpu MINUTES=0.1 makes a dry run.
+#   bash benchmarks/gpu_check.sh                   # the bunny, simulated from ../shared/assets
+#   bash benchmarks/gpu_check.sh DATASET...        # datasets the suite simulated (its cache
+#                                                  # folders, NAME-999v-346x260-t8)
+#   MINUTES=2 bash benchmarks/gpu_check.sh DATASET
+#   DEVICE=cpu MINUTES=0.1 bash benchmarks/gpu_check.sh DATASET   # a dry run without a GPU
+#
+# On a machine without network or without Open3D, give datasets copied with
+# benchmarks/pack_datasets.py (and HYBRIDNEUS_TEST_SCENES=<copy>/test-scenes for the tests).
+# Each step has a time limit, the most important first, so the whole takes under 10 minutes.
 set -u
-CARRY=${1:-gpu_carry}
+cd "$(dirname "$0")/.."
 MINUTES=${MINUTES:-1}
 DEVICE=${DEVICE:-cuda}
-OUT=${OUT:-/tmp/gpu-check-out}
-RUNS=/tmp/gpu-check-runs
-mkdir -p "$OUT"
-exec >"$OUT/session.log" 2>&1
-export HYBRIDNEUS_BENCH_COMMIT=$(cat "$CARRY/COMMIT")
-PY=python3
+RUNS=${RUNS:-/tmp/gpu-check-runs}
+CACHE=${CACHE:-/tmp/hybridneus-bench}
+if [ -n "${OUT:-}" ]; then
+  mkdir -p "$OUT"
+  suite_out=(--out "$OUT/suite.jsonl"); launches_out=(--out "$OUT/launches.jsonl")
+  grids_out=(--out "$OUT/grids.jsonl")
+else
+  suite_out=(); launches_out=(); grids_out=()
+fi
+LOG=${LOG:-${OUT:-.}/gpu_check.log}
+exec > >(tee "$LOG") 2>&1
+PY=${PYTHON:-python3}
 
 date -u
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
-$PY -m pip install -q --no-deps --no-build-isolation -e . 2>&1 | tail -2
-if ! $PY -c "import hybridneus.grids, hybridneus.cli" 2>/dev/null; then
-  # No install (an old setuptools, say): the same package layout from links, as
-  # pyproject.toml maps it (grids/ and cli/ are hybridneus.grids and hybridneus.cli).
-  site=/tmp/hybridneus-site
-  rm -rf "$site" && mkdir -p "$site/hybridneus"
-  for f in "$PWD"/hybridneus/*; do ln -s "$f" "$site/hybridneus/"; done
-  ln -s "$PWD/grids" "$site/hybridneus/grids"
-  ln -s "$PWD/cli" "$site/hybridneus/cli"
-  export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
-  PY="$PY -P"  # or the repository root, first on the path, would shadow the link tree
-  echo "hybridneus from links in $site (pip install -e . failed)"
-fi
 $PY -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"
-echo "commit $HYBRIDNEUS_BENCH_COMMIT"
 
-echo "== 1. fits of $MINUTES minutes"
-# Only dataset folders (test-scenes/ beside them holds the tests' small scenes).
-scenes=$(for d in "$CARRY"/*/; do [ -f "$d/scene.json" ] && basename "$d" | sed -E 's/-[0-9]+v-[0-9]+x[0-9]+-t[0-9]+$//'; done)
-timeout 400 $PY benchmarks/run_suite.py --assets /nonexistent --cache "$CARRY" \
-    --out-runs "$RUNS" --scenes $scenes --minutes "$MINUTES" --curve 2 \
-    --presets fast --device "$DEVICE" --threads 2 --fit-only
-for run in "$RUNS"/*/; do
-  [ -d "$run/snapshots" ] || continue
-  name=$(basename "$run")
-  tar -cf "$OUT/$name.tar" -C "$run" fit.json config.yaml scene.yaml metrics.csv
-  for snap in "$run"/snapshots/*.pt; do
-    cp "$snap" "$OUT/$name.$(basename "$snap")"
-  done
+if [ $# -eq 0 ]; then
+  # the suite's cached copy of the bunny (simulated on first use: needs Open3D)
+  $PY -c "
+import argparse, sys
+sys.path.insert(0, 'benchmarks')
+import run_suite
+args = argparse.Namespace(views=999, width=346, height=260, test_views=8, noise=(0.0, 0.0),
+                          cache=__import__('pathlib').Path('$CACHE'), assets=run_suite.DEFAULT_ASSETS)
+run_suite.dataset_for('bunny', run_suite.find_assets(args.assets), args)" || exit 2
+  set -- "$CACHE/bunny-999v-346x260-t8"
+fi
+
+echo "== 1. pytest -m gpu"
+timeout 120 $PY -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tail -5
+
+echo "== 2. fits of $MINUTES minutes on $DEVICE"
+score=()
+$PY -c "import open3d, pymeshlab, trimesh" 2>/dev/null || score=(--fit-only)
+for dataset in "$@"; do
+  name=$(basename "$dataset" | sed -E 's/-[0-9]+v-[0-9]+x[0-9]+-t[0-9]+$//')
+  timeout 300 $PY benchmarks/run_suite.py --cache "$(dirname "$dataset")" --out-runs "$RUNS" \
+      --scenes "$name" --minutes "$MINUTES" --curve 2 --presets fast --device "$DEVICE" \
+      --threads 2 "${score[@]}" "${suite_out[@]}"
 done
-ls -la "$OUT"
+[ ${#score[@]} -eq 0 ] || echo "runs in $RUNS: score them where Open3D is installed"
 
-echo "== 2. pytest -m gpu"
-HYBRIDNEUS_TEST_SCENES=$PWD/$CARRY/test-scenes timeout 90 $PY -m pytest -q -m gpu -p no:cacheprovider tests/test_grids.py \
-    tests/test_data_windows.py tests/test_training.py 2>&1 | tail -5
-
-first=$(dirname "$(ls "$CARRY"/*/scene.json | head -1)")
-echo "== 3. bench_launches on $first"
-timeout 75 $PY benchmarks/bench_launches.py --cache "$first" --device "$DEVICE" --steps 30 \
-    --out "$OUT/gpu.jsonl"
+echo "== 3. bench_launches on $1"
+timeout 75 $PY benchmarks/bench_launches.py --cache "$1" --device "$DEVICE" --steps 30 \
+    "${launches_out[@]}"
 
 echo "== 4. bench_grids, joined against per level"
 timeout 45 $PY benchmarks/bench_grids.py --device "$DEVICE" --impl ours-joined ours-per-level \
-    --log2-t 17 19 --log2-n 15 17 --repeats 5 --out "$OUT/gpu.jsonl"
+    --log2-t 17 19 --log2-n 15 17 --repeats 5 "${grids_out[@]}"
 date -u

@@ -1,15 +1,18 @@
 """Write docs/benchmarks.md from the result lines in benchmarks/results/*.jsonl.
 
 Every figure in that page comes from a line here, with its commit, date, machine and the
-command that made it; lines from trees with uncommitted changes are left out. Groups of lines
-are summarised (mean and spread over seeds, mean over scenes); ``--compare BASE NEW`` adds a
-table of two commits' fits paired by scene, seed, preset and budget on the same machine;
-``--same-as OLD NEW`` lets OLD's preset fits stand beside NEW's variants where NEW repeats them
-(checked on every fit both commits made).
+command that made it; lines from trees with uncommitted changes are left out, and so are the
+lines of experiments removed from the config (:func:`common.reruns_today`): the results files
+keep the history, the page shows what the software does now. Groups of lines are summarised
+(mean and spread over seeds, mean over scenes), the newest commit's of each kind of group;
+``--compare BASE NEW`` adds a table of two commits' fits paired by scene, seed, preset and
+budget on the same machine; ``--same-as OLD NEW`` lets OLD's preset fits stand beside NEW's
+variants where NEW repeats them (checked on every fit both commits made).
 
     python benchmarks/report.py                                  # writes docs/benchmarks.md
     python benchmarks/report.py --compare cf67ae4 4d2c1e0 --check
     python benchmarks/report.py --readme 4d2c1e0     # and README.md's results table
+    python benchmarks/report.py --accuracy 4d2c1e0   # and docs/accuracy.md's table of scenes
 """
 
 from __future__ import annotations
@@ -75,7 +78,7 @@ def _groups(scene: str) -> list[str]:
 
 def base_preset(preset: str) -> str:
     """The preset a variant's name starts with: ``fast priors.hull.enabled=false`` (a
-    ``--set`` override) and ``fast+train.view_balance=1`` (a preset spec) -> ``fast``."""
+    ``--set`` override) and ``fast+train.lr=0.02`` (a preset spec) -> ``fast``."""
     return re.split(r"[ +]", preset, maxsplit=1)[0]
 
 
@@ -103,6 +106,21 @@ def _how(r: dict) -> str:
     return f"`{command}`"
 
 
+def newest(lines: list[dict], key) -> list[dict]:
+    """The lines of the newest commit (by its newest line's date; of equal dates, the later
+    line: results files are appended in time) of every ``key(line)``."""
+    latest: dict = {}
+    for r in lines:
+        k = key(r)
+        if k not in latest or r["date"] >= latest[k][1]:
+            latest[k] = (r["commit"], r["date"])
+    return [r for r in lines if latest[key(r)][0] == r["commit"]]
+
+
+def _group_key(r: dict) -> tuple:
+    return (r["preset"], _budget(r), _cpu(r))
+
+
 def _runs(lines: list[dict]):
     """``lines`` grouped by (commit, preset, budget, machine), oldest first: yields each key,
     its lines, and its lines by scene as (scene, lines) pairs, assets before generated
@@ -118,44 +136,67 @@ def _runs(lines: list[dict]):
                           sorted(by_scene, key=lambda s: (s.startswith("gen-"), s))]
 
 
+def _mean_of(rs: list[dict], key: str) -> float | None:
+    values = [r[key] for r in rs if r.get(key) is not None]
+    return statistics.mean(values) if values else None
+
+
 def suite_section(lines: list[dict]) -> list[str]:
-    """Accuracy: per (commit, preset, budget, machine) the mean CD per scene over seeds;
-    variants with their preset beside them are in :func:`variant_section` instead."""
-    paired = _with_base(lines)
-    alone = [r for r in lines if (*_run_key(r), r["preset"]) not in paired]
+    """Accuracy: per (preset, budget, machine) and scene the newest commit's fits, the mean
+    CD over their seeds by both protocols where its lines have both; variants (a preset with
+    overrides) are in :func:`variant_section`, beside their preset."""
+    plain = [r for r in lines if base_preset(r["preset"]) == r["preset"]]
+    latest = newest(plain, lambda r: (*_group_key(r), r["scene"]))
     out = ["## Accuracy", "",
-           "Chamfer distance (the paper's protocol, lower is better) of `hybridneus mesh`'s "
-           "mesh against the simulator's ground truth; per scene the mean over seeds and "
-           "their range. `gen-<kind>-<seed>` are generated objects "
-           "(`hybridneus.simulate.generated`); their means are per kind.", ""]
-    for (commit, preset, budget, cpu), rows, scenes in _runs(alone):
-        dates = sorted(r["date"][:10] for r in rows)
+           "Chamfer distance (lower is better) of `hybridneus mesh`'s mesh against the "
+           "simulator's ground truth, by the unit-cube protocol and, in the lines that have it, "
+           "by EventNeuS's published one (`hybridneus eval --protocol`, docs/evaluation.md); "
+           "per scene the newest commit's fits, the mean over their seeds and their range, and "
+           "each protocol's floor (the ground truth against a second sampling of itself: no "
+           "mesh scores below it). `gen-<kind>-<seed>` are generated objects "
+           "(`hybridneus.simulate.generated`). Means over scenes where one commit made every "
+           "row.", ""]
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in latest:
+        groups[_group_key(r)].append(r)
+    for (preset, budget, cpu), rows in sorted(groups.items(),
+                                              key=lambda kv: max(r["date"] for r in kv[1])):
+        by_scene: dict[str, list[dict]] = defaultdict(list)
+        for r in rows:
+            by_scene[r["scene"]].append(r)
         hows = list(dict.fromkeys(_how(r) for r in rows))  # each command once, in order
-        how = ("command: " if len(hows) == 1 else "commands: ") + "; ".join(hows)
-        out += [f"### `{preset}`, {budget}, commit {commit}, {cpu}", "",
-                f"{len(rows)} fits, {dates[0]} to {dates[-1]}; {how}", "",
-                "| scene | seeds | CD mean | CD range | F@1% | steps | longest wall s "
-                "| first step s |",
-                "|---|---|---|---|---|---|---|---|"]
-        means: dict[str, list[float]] = defaultdict(list)
-        for scene, rs in scenes:
+        both = any(r.get("chamfer_eventneus") is not None for r in rows)
+        extra = " floor | CD eventneus | floor eventneus |" if both else ""
+        out += [f"### `{preset}`, {budget}, {cpu}", "",
+                "| scene | commit | date | seeds | CD mean | CD range | F@1% |" + extra
+                + " steps | longest wall s | first step s |",
+                "|---|---|---|---|---|---|---|" + "---|" * (3 if both else 0) + "---|---|---|"]
+        means: dict[str, list[list[float | None]]] = defaultdict(list)
+        for scene in sorted(by_scene, key=lambda sc: (sc.startswith("gen-"), sc)):
+            rs = by_scene[scene]
             cds = [r["chamfer"] for r in rs if r.get("chamfer") is not None]
             failed = len(rs) - len(cds)
             mean = statistics.mean(cds) if cds else None
+            ev = [_mean_of(rs, k) for k in ("floor", "chamfer_eventneus", "floor_eventneus")]
             if mean is not None:
                 for group in _groups(scene):
-                    means[group].append(mean)
-            fs = [r["fscore"] for r in rs if r.get("fscore") is not None]
+                    means[group].append([mean, *ev])
             note = f" ({failed} without a surface)" if failed else ""
             firsts = [r["first_step_s"] for r in rs if r.get("first_step_s") is not None]
-            out.append(f"| {scene} | {len(rs)}{note} | {_f(mean)} | {_spread(cds)} | "
-                       f"{_f(statistics.mean(fs) if fs else None, 3)} | "
+            cells = "".join(f" {_f(v)} |" for v in ev) if both else ""
+            out.append(f"| {scene} | {rs[0]['commit']} | {max(r['date'] for r in rs)[:10]} | "
+                       f"{len(rs)}{note} | {_f(mean)} | {_spread(cds)} | "
+                       f"{_f(_mean_of(rs, 'fscore'), 3)} |{cells} "
                        f"{round(statistics.mean(r['steps'] for r in rs))} | "
                        f"{max(r.get('fit_wall_s', 0) for r in rs):.0f} | "
                        f"{_f(max(firsts) if firsts else None, 1)} |")
-        for name, values in means.items():
-            out.append(f"| **mean, {name}** | | **{statistics.mean(values):.4f}** | | | | | |")
-        out.append("")
+        if len({r["commit"] for r in rows}) == 1:
+            for name, values in means.items():
+                cols = [None if any(v[i] is None for v in values)
+                        else statistics.mean(v[i] for v in values) for i in range(4)]
+                cells = "".join(f" **{_f(v)}** |" for v in cols[1:]) if both else ""
+                out.append(f"| **mean, {name}** | | | | **{_f(cols[0])}** | | |{cells} | | |")
+        out += _command_lines([{"command": h.strip("`")} for h in hows])
     return out
 
 
@@ -214,8 +255,9 @@ def cleanup_section(lines: list[dict]) -> list[str]:
 
     The field is the same, so a difference is the step's alone, with no seed noise in it."""
     keys = [k for k, _ in CLEANUP_STEPS]
-    runs = list(_runs([r for r in lines
-                       if all(k in r for k in keys) and r.get("chamfer") is not None]))
+    scored = [r for r in lines if all(k in r for k in keys) and r.get("chamfer") is not None
+              and base_preset(r["preset"]) == r["preset"]]
+    runs = list(_runs(newest(scored, _group_key)))
     if not runs:
         return []
     out = ["## Mesh clean-up on the same fields", "",
@@ -290,6 +332,18 @@ def variant_section(lines: list[dict],
     paired = _with_base(lines)
     if not paired:
         return []
+    # of each experiment (a preset's variants on one budget and machine), the newest commit
+    variants_of: dict[tuple, set[str]] = defaultdict(set)
+    for *k, p in paired:
+        variants_of[(*k, base_preset(p))].add(p)
+    latest: dict[tuple, tuple[str, str]] = {}
+    for (commit, budget, cpu, base), names in variants_of.items():
+        date = max(r["date"] for r in lines if _run_key(r) == (commit, budget, cpu))
+        kind = (budget, cpu, base, frozenset(names))
+        if kind not in latest or date >= latest[kind][1]:
+            latest[kind] = (commit, date)
+    keep = {(commit, budget, cpu) for (budget, cpu, _, _), (commit, _) in latest.items()}
+    paired = {k for k in paired if tuple(k[:3]) in keep}
     out = ["## Variants against their preset", "",
            "A variant is a preset with config overrides, fitted in the same suite run as the "
            "preset itself (same commit, budget and machine; the suite interleaves them). Per "
@@ -297,7 +351,7 @@ def variant_section(lines: list[dict],
            "change on the seeds both have; `!` marks a change beyond the preset's seed range "
            "(`+`: worse, `-`: better), `empty` a fit that left no surface. The keep rule for a "
            "prior: on by default only if switching it off makes the mean worse and no scene "
-           "better beyond the range.", ""]
+           "better beyond the range. The newest commit of each set of variants.", ""]
     runs = sorted({(k[:3], base_preset(k[3])) for k in paired}, key=lambda kv: kv[0])
     for (commit, budget, cpu), base in runs:
         variants = sorted(p for *k, p in paired if tuple(k) == (commit, budget, cpu)
@@ -405,11 +459,40 @@ def _count(n: int, noun: str) -> str:
 
 def readme_text(readme: str, lines: list[dict]) -> str:
     """``readme`` with its results block regenerated for the commit its marker names."""
-    start = readme.index(README_START)
-    commit = readme[start + len(README_START):].split(" ", 1)[0]
-    head_end = readme.index("\n", start) + 1
-    end = readme.index(README_END)
-    return readme[:head_end] + "\n".join(readme_block(lines, commit)) + "\n" + readme[end:]
+    return _block_text(readme, README_START, lines, readme_block)
+
+
+ACCURACY = common.REPO / "docs" / "accuracy.md"
+ACCURACY_START = "<!-- scenes: python benchmarks/report.py --accuracy "
+
+
+def accuracy_block(lines: list[dict], commit: str) -> list[str]:
+    """docs/accuracy.md's table: per scene (assets, then generated objects) and budget, the
+    commit's plain ``fast`` fits averaged over their seeds, by both protocols."""
+    rows = [r for r in lines if r["commit"] == commit and r["preset"] == "fast"
+            and r.get("chamfer") is not None]
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in rows:
+        groups[(r["scene"].startswith("gen-"), r["scene"], _budget(r), _cpu(r))].append(r)
+    out = ["| scene | budget | machine | seeds | Chamfer | accuracy | completeness | F@1% "
+           "| Chamfer, eventneus protocol | steps |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
+    for (_, scene, budget, cpu), rs in sorted(groups.items()):
+        cells = [_f(_mean_of(rs, k)) for k in ("chamfer", "accuracy", "completeness")]
+        out.append(f"| {scene} | {budget} | {cpu} | {len(rs)} | {' | '.join(cells)} | "
+                   f"{_f(_mean_of(rs, 'fscore'), 3)} | {_f(_mean_of(rs, 'chamfer_eventneus'))} "
+                   f"| {round(statistics.mean(r['steps'] for r in rs))} |")
+    return out
+
+
+def _block_text(text: str, marker: str, lines: list[dict], block) -> str:
+    """``text`` with the generated block after ``marker`` (which names a commit) made anew,
+    up to :data:`README_END`."""
+    start = text.index(marker)
+    commit = text[start + len(marker):].split(" ", 1)[0]
+    head_end = text.index("\n", start) + 1
+    end = text.index(README_END, head_end)
+    return text[:head_end] + "\n".join(block(lines, commit)) + "\n" + text[end:]
 
 
 def recordings_section(rows: list[dict]) -> list[str]:
@@ -435,30 +518,28 @@ def recordings_section(rows: list[dict]) -> list[str]:
 
 
 def poses_section(rows: list[dict]) -> list[str]:
-    """bench_poses.py: pose refinement on a capture with known pose errors."""
+    """bench_poses.py: fits on a capture with known pose errors, its track as given and
+    smoothed (the lines that smoothed; per-view corrections were removed in 0.3)."""
+    rows = [r for r in rows
+            if any(s.startswith("refine.pose_smoothing=") for s in r.get("refine_sets") or [])]
     if not rows:
         return []
-    out = ["## Pose refinement: a capture with known pose errors", "",
+    out = ["## Poses with known errors: the track as given and smoothed", "",
            "The scene simulated with errors in its written training poses (RMS rotation, RMS "
            "camera-centre shift as a share of the camera distance, a clock offset in views; "
            "events from the true poses) and fitted with the same preset, seed and steps: on "
-           "the true poses (exact), on the erroneous ones as given, on those with "
-           "`refine.poses=true` and the line's settings (refined; a line that sets "
-           "`refine.poses=false` refines by its other settings alone, such as "
-           "`refine.pose_smoothing`) and, in the lines that have it, on the true poses "
-           "with the same refinement (what it costs where nothing needs it). Pose errors "
-           "against the "
-           "truth: mean (max) rotation in degrees and camera-centre shift in % of the "
-           "distance; errors drawn every N views and interpolated between say `drift N`, errors "
-           "drawn from another seed than 0 `noise seed S`, and "
-           "the refined fits' extra settings are listed. Step-time ratios are whole-fit means "
-           "(corrections learn in the second half); lines run beside other work "
-           "(`--shared-machine`) leave them out (-). Targets: refined / exact Chamfer at most "
-           "1.2; on exact poses, refinement at most 1.05 of the Chamfer and 1.15 of the step "
-           "time.", "",
-           "| scene | views | errors (deg, share, views) | refinement | steps | CD exact | "
-           "CD given | CD refined | given / exact | refined / exact | exact refined / exact | "
-           "given poses | refined poses | step time refined / given | step time on exact | "
+           "the true poses (exact), on the erroneous ones as given, on those smoothed with the "
+           "line's settings (`refine.pose_smoothing`; -1 chooses the window from the track, "
+           "and the window chosen is listed) and, in the lines that have it, on the true poses "
+           "smoothed the same way (what smoothing costs where nothing needs it). Pose errors "
+           "against the truth: mean (max) rotation in degrees and camera-centre shift in % of "
+           "the distance; errors drawn from another seed than 0 say `noise seed S`. Step-time "
+           "ratios are whole-fit means; lines run beside other work (`--shared-machine`) leave "
+           "them out (-). Targets: smoothed / exact Chamfer at most 1.2; on exact poses, "
+           "smoothing at most 1.05 of the Chamfer and 1.15 of the step time.", "",
+           "| scene | views | errors (deg, share, views) | smoothing | steps | CD exact | "
+           "CD given | CD smoothed | given / exact | smoothed / exact | exact smoothed / exact | "
+           "given poses | smoothed poses | step time smoothed / given | step time on exact | "
            "commit | machine | date |",
            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -466,7 +547,7 @@ def poses_section(rows: list[dict]) -> list[str]:
         drift = f", drift {n['smooth_views']:g}" if n.get("smooth_views") else ""
         if n.get("seed"):  # other errors of the same size
             drift += f", noise seed {n['seed']}"
-        sets = " ".join(f"`{s}`" for s in r.get("refine_sets") or []) or "per view"
+        sets = " ".join(f"`{s}`" for s in r["refine_sets"] if s != "refine.poses=false")
         if r.get("pose_window") is not None:
             sets += f" (chose {r['pose_window']} views)"
         pose = [f"{p['rot_deg_mean']:.2f} ({p['rot_deg_max']:.2f}) deg, "
@@ -483,6 +564,32 @@ def poses_section(rows: list[dict]) -> list[str]:
                    f"{'-' if on_exact is None else f'{on_exact:.3f}'} | {pose[0]} | "
                    f"{pose[1]} | {'-' if step_given is None else f'{step_given:.2f}'} | "
                    f"{'-' if step_exact is None else f'{step_exact:.2f}'} | {r['commit']} | "
+                   f"{_cpu(r)} | {r['date'][:10]} |")
+    return out + _command_lines(rows)
+
+
+def budget_section(rows: list[dict]) -> list[str]:
+    """bench_budget.py: a --minutes fit on a machine busy for a while, the newest run's
+    lines."""
+    if not rows:
+        return []
+    last = rows[-1]
+    rows = [r for r in rows if r["commit"] == last["commit"] and r["command"] == last["command"]]
+    out = ["## A budget on a machine busy for a while", "",
+           "`hybridneus fit --minutes M` with processes spinning every core beside it for its "
+           "first minutes (busy), and alone (quiet): the steps it ran (of the final schedule), "
+           "how often it re-planned its length and the slowest and fastest pace its re-plans "
+           "measured (multiples of the probe's step time), and the share of the budget the "
+           "whole command used. Target: at least 95% of the budget, never more than it.", "",
+           "| dataset | budget | busy | steps | re-plans | paces | wall s | used | commit | "
+           "machine | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        busy = f"{r['busy_minutes']:g} min, {r['hogs']} processes" if r["busy_minutes"] else "-"
+        ran = f"{r['steps']} of {r['planned']}" if r["stopped_early"] else str(r["steps"])
+        paces = "-" if not r.get("paces") else "x to ".join(f"{p:.2f}" for p in r["paces"]) + "x"
+        out.append(f"| {r['dataset']} | {r['minutes']:g} min | {busy} | {ran} | {r['replans']} "
+                   f"| {paces} | {r['wall_s']:.0f} | {100 * r['used']:.1f}% | {r['commit']} | "
                    f"{_cpu(r)} | {r['date'][:10]} |")
     return out + _command_lines(rows)
 
@@ -573,14 +680,6 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
                        f"| {r['commit']} | {_cpu(r)} | {r['date'][:10]} |")
         out += ["", f"Command: `{rows[-1]['command']}`", ""]
     for bench, title in (("repeat", "Repeatability"), ("step", "One training step"),
-                         ("trained_step", "A trained field's step"),
-                         ("early", "The first steps of a fit"),
-                         ("collapse", "Which part of the field moved when it emptied"),
-                         ("carving", "What a fit's opening holds of the solid"),
-                         ("floor", "Chamfer floors: ideal meshes that lack an unseen part, and the "
-                          "ground truth meshed"),
-                         ("rare_fill", "Meshing that also fills space few views see"),
-                         ("probe", "Budget probe: the mean step it predicts, repeated"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
                          ("data", "Data"), ("simulate", "Simulation"),
@@ -590,21 +689,10 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             by_machine[_cpu(r)].append(r)
         for cpu, rows in by_machine.items():
             # the latest run on each machine: the lines of its command and commit (of the
-            # carving and convert, whose runs each take one dataset, every command of that
-            # commit)
+            # convert, whose runs each take one dataset, every command of that commit)
             last = rows[-1]
-            if bench == "floor":  # a floor per dataset and mesh, the newest, whichever run
-                rows = list({(r["dataset"], r["mesh"]): r for r in rows}.values())
-            elif bench == "early":  # the newest of each opening and variant, whichever run
-                rows = list({(r["dataset"], r["variant"], r["steps"], r["iters"]): r
-                             for r in rows}.values())
-            elif bench == "collapse":  # the newest of each fit and pair of steps
-                rows = list({(r["dataset"], r["seed"], r["iters"], tuple(r["at"]),
-                              tuple(r["overrides"])): r for r in rows}.values())
-            else:
-                rows = [r for r in rows if r["commit"] == last["commit"]
-                        and (bench in ("carving", "convert")
-                             or r["command"] == last["command"])]
+            rows = [r for r in rows if r["commit"] == last["commit"]
+                    and (bench == "convert" or r["command"] == last["command"])]
             commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
             commits = ", ".join(dict.fromkeys(r["commit"] for r in rows))
             out += [f"### {title}: {cpu}, commit {commits}, {last['date'][:10]}", "",
@@ -652,7 +740,7 @@ def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple
         clean = [r for r in common.read_lines(path) if not r.get("dirty")]
         if clean:
             results[path.stem] = clean
-    suite = results.get("suite", [])
+    suite = [r for r in results.get("suite", []) if common.reruns_today(r)]
     args = " ".join([*(f"--compare {b} {n}" for b, n in compare),
                      *(f"--same-as {o} {n}" for o, n in same_as)])
     out = ["# Benchmarks", "",
@@ -666,9 +754,10 @@ def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple
     out += suite_section(suite)
     out += cleanup_section(suite)
     out += recordings_section(results.get("recordings", []))
-    out += poses_section(results.get("poses", []))
+    out += poses_section([r for r in results.get("poses", []) if common.reruns_today(r)])
     out += track_section(results.get("track", []))
     out += threshold_section(results.get("threshold", []))
+    out += budget_section(results.get("budget", []))
     out += reliability_section(results.get("reliability", []))
     out += speed_section(results)
     return "\n".join(out).rstrip() + "\n"
@@ -685,19 +774,24 @@ def main() -> None:
                     help="exit 1 if the page differs from what the lines give")
     ap.add_argument("--readme", metavar="COMMIT",
                     help="also write README.md's results table from COMMIT's suite lines")
+    ap.add_argument("--accuracy", metavar="COMMIT",
+                    help="also write docs/accuracy.md's table of scenes from COMMIT's lines")
     args = ap.parse_args()
-    if args.readme:
-        current = README.read_text()
-        start = current.index(README_START) + len(README_START)
+    suite = [r for r in common.read_lines(common.RESULTS / "suite.jsonl") if not r.get("dirty")]
+    for commit, path, marker, block in ((args.readme, README, README_START, readme_block),
+                                        (args.accuracy, ACCURACY, ACCURACY_START,
+                                         accuracy_block)):
+        if not commit:
+            continue
+        current = path.read_text()
+        start = current.index(marker) + len(marker)
         end = current.index(" ", start)
-        suite = [r for r in common.read_lines(common.RESULTS / "suite.jsonl")
-                 if not r.get("dirty")]
-        readme = readme_text(current[:start] + args.readme + current[end:], suite)
-        if args.check and readme != current:
-            raise SystemExit(f"{README}: results out of date; rerun the report")
+        text = _block_text(current[:start] + commit + current[end:], marker, suite, block)
+        if args.check and text != current:
+            raise SystemExit(f"{path}: results out of date; rerun the report")
         if not args.check:
-            README.write_text(readme)
-            print(f"wrote {README}'s results for {args.readme}")
+            path.write_text(text)
+            print(f"wrote {path}'s results for {commit}")
     text = build([tuple(c) for c in args.compare], [tuple(c) for c in args.same_as])
     if args.check:
         same = args.out.is_file() and args.out.read_text() == text

@@ -5,7 +5,9 @@
 host without the meshing libraries) is scored here from those files alone. Meshes are scored
 by the paper's Chamfer protocol as ``hybridneus mesh`` makes them (``res`` points across the
 crop's box, unseen pockets filled, cavities removed), and also without each of those two
-clean-ups, which prices them without another fit.
+clean-ups, which prices them without another fit. The final mesh is also scored by
+EventNeuS's published protocol (``chamfer_eventneus``), and each line carries both
+protocols' floors for its scene (the ground truth against a second sampling of itself).
 """
 
 from __future__ import annotations
@@ -179,7 +181,7 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     from hybridneus.config import load_config
     from hybridneus.data import load_dataset
     from hybridneus.data.dataset import read_camera_centres
-    from hybridneus.evaluation.geometry import sdf_mae
+    from hybridneus.evaluation.geometry import chamfer_distance, chamfer_floor, sdf_mae
     from hybridneus.meshing.convert import load_mesh, save_mesh
 
     for name in ("fit.json", "config.yaml"):
@@ -214,8 +216,11 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
     report = {**info, "run": str(run_dir), "res": res, "volume": common.CROP_VOLUME, **final,
               "curve": curve,
               "chamfer_unfilled": unfilled["chamfer"], "chamfer_cavities": cavities["chamfer"],
-              "chamfer_ungrouped": ungrouped["chamfer"]}
+              "chamfer_ungrouped": ungrouped["chamfer"],
+              "floor": chamfer_floor(gt),
+              "floor_eventneus": chamfer_floor(gt, protocol="eventneus")}
     if mesh is not None and len(mesh.faces):
+        report["chamfer_eventneus"] = chamfer_distance(mesh, gt, protocol="eventneus").chamfer
         save_mesh(mesh, run_dir / "mesh.ply")
         if len(ungrouped_mesh.faces):  # for before/after pictures (benchmarks/pictures.py)
             save_mesh(ungrouped_mesh, run_dir / "mesh_ungrouped.ply")

@@ -32,8 +32,8 @@ TINY_FIT = [
 TINY_SIZE = (24, 18)  # width, height
 
 
-#: A machine without the simulator's Open3D (a lent GPU machine) copies the scenes from this
-#: folder instead, simulated elsewhere by ``benchmarks/gpu_pack.py --test-scenes``.
+#: A machine without the simulator's Open3D (a GPU host) copies the scenes from this folder
+#: instead, simulated elsewhere by ``benchmarks/pack_datasets.py --test-scenes``.
 PRESIMULATED = "HYBRIDNEUS_TEST_SCENES"
 
 

@@ -103,67 +103,14 @@ def test_another_camera_path_is_simulated_and_named_apart(tmp_path):
     assert suite.suite_name(source, default) == "gen-bowl-3"
 
 
-def test_floor_meshes_leave_out_exactly_the_unseen_part():
-    _suite_module()
-    import bench_floor
-
-    from hybridneus.evaluation.inside import inside_mask
-    from hybridneus.simulate.generated import concatenate_parts, generated_parts, generated_scene
-
-    parts = generated_parts("slab", 7)
-    assert len(parts) == 2  # body, plate
-    whole = concatenate_parts(parts)
-    assert np.array_equal(whole.vertices, generated_scene("slab", 7).vertices)
-    slab = bench_floor.ideal_meshes("slab", 7)
-    body, plate = (p.to_trimesh() for p in parts)
-    centre = plate.bounds.mean(axis=0) * np.array([1, 0, 1]) + body.bounds.mean(axis=0) * [0, 1, 0]
-    edge = np.array([body.bounds[0, 0] + 1e-3, centre[1], centre[2]])
-    assert inside_mask(slab["ring"], np.stack([centre, edge])).tolist() == [False, True]
-    assert inside_mask(slab["body"], centre[None]).tolist() == [True]
-    cage_parts = generated_parts("cage", 7)
-    cage = bench_floor.ideal_meshes("cage", 7)
-    rings = [p for p in cage_parts if np.ptp(p.vertices[:, 1]) < 0.05]
-    assert 2 <= len(rings) <= 3  # the cage draws 2 or 3 rings
-    kept = sum(len(p.faces) for p in cage_parts) - sum(len(p.faces) for p in rings)
-    assert len(cage["no rings"].faces) == kept
-    assert len(cage["body"].faces) == len(cage_parts[0].faces)
-    (bowl,) = (p.to_trimesh() for p in generated_parts("bowl", 7))
-    lid = bench_floor.ideal_meshes("bowl", 7)["lid"]
-    (x0, y0, z0), (x1, y1, z1) = bowl.bounds
-    hollow = np.array([[(x0 + x1) / 2, y1 - 0.02 * (y1 - y0), (z0 + z1) / 2]])  # opens to +y
-    assert inside_mask(bowl, hollow).tolist() == [False]
-    assert inside_mask(lid, hollow).tolist() == [True]
-    assert np.allclose(lid.bounds, bowl.bounds)
-
-
-def test_a_meshed_floor_loses_a_wire_thinner_than_the_whole_cube_voxel_only():
-    """bench_floor --meshed: a wire 1.3 voxels of the whole cube wide (res 48) is lost there
-    and kept over the truth's box, 4.5 times finer; a thick box is kept by both."""
-    _suite_module()
-    import bench_floor
-    import trimesh
-
-    voxel = 2.0 / 47
-    wire = trimesh.creation.cylinder(radius=0.65 * voxel, height=0.4, sections=16)
-    wire.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
-    block = trimesh.creation.box(extents=(0.3, 0.1, 0.3))
-    block.apply_translation((0.0, -0.25, 0.0))
-    gt = trimesh.util.concatenate([wire, block])
-    meshes = bench_floor.meshed_floors(bench_floor.TruthField([wire, block]), gt, 48)
-    cube, box = (meshes[f"meshed at res 48, {v}"] for v in ("whole cube", "the truth's box"))
-    assert box.bounds[1, 1] > 0.19 and cube.bounds[1, 1] < 0.0  # the wire's top, y = 0.2
-    assert abs(cube.area - block.area) < 0.2 * block.area
-    assert box.area > cube.area + 0.5 * wire.area
-
-
 def test_preset_specs_name_a_preset_and_its_overrides():
     _suite_module()
     import suite_jobs
 
     assert suite_jobs.preset_spec("fast") == ("fast", [])
     assert suite_jobs.preset_spec("quality-rgb") == ("quality", ["train.supervision=rgb"])
-    assert suite_jobs.preset_spec("fast+train.view_balance=1+priors.hull.enabled=false") == (
-        "fast", ["train.view_balance=1", "priors.hull.enabled=false"])
+    assert suite_jobs.preset_spec("fast+train.lr=0.02+priors.hull.enabled=false") == (
+        "fast", ["train.lr=0.02", "priors.hull.enabled=false"])
 
 
 def test_a_dirty_tree_is_refused_unless_told(monkeypatch):
@@ -220,25 +167,24 @@ def test_the_report_pairs_two_commits_and_leaves_dirty_lines_out(tmp_path, monke
     text = report.build([("aaa", "bbb")])
     assert "| bunny | fast | 15 min | 2 | 0.0130 | 0.0120-0.0140 | 0.0120 |" in text
     assert "-7.7%" in text and "commit ccc" not in text and "0.5000" not in text
-    assert "| gen-box-3 | 1 | 0.0200 |" in text
+    assert "| gen-box-3 | bbb | 2026-11-26 | 1 | 0.0200 |" in text
     assert "| 9000 | 905 | - |" in text  # the longest wall time; no first-step time given
 
 
-def test_gpu_pack_carries_what_a_fit_reads_and_unpacks_returned_runs(tiny_scene, tmp_path):
-    """benchmarks/gpu_pack.py: the packed copy loads as the same dataset (events identical,
-    compressed, no frames); the flat files a GPU check returns become a run folder again."""
-    import tarfile
-
+def test_packed_datasets_hold_what_a_fit_reads(tiny_scene, tmp_path):
+    """benchmarks/pack_datasets.py: the packed copy loads as the same dataset (events
+    identical, compressed, no frames, no test split)."""
     import numpy as np
 
     from hybridneus.data import load_dataset
 
     sys.path.insert(0, str(SUITE.parent))
-    spec = importlib.util.spec_from_file_location("gpu_pack", SUITE.parent / "gpu_pack.py")
-    gpu_pack = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gpu_pack)
+    spec = importlib.util.spec_from_file_location("pack_datasets",
+                                                  SUITE.parent / "pack_datasets.py")
+    pack_datasets = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pack_datasets)
 
-    assert gpu_pack.pack(tiny_scene / "device", tmp_path / "carry") > 0
+    assert pack_datasets.pack(tiny_scene / "device", tmp_path / "carry") > 0
     packed = tmp_path / "carry" / "device"
     assert not (packed / "train" / "rgb").exists() and not (packed / "test").exists()
     a, b = load_dataset(tiny_scene / "device")["train"], load_dataset(packed)["train"]
@@ -246,20 +192,8 @@ def test_gpu_pack_carries_what_a_fit_reads_and_unpacks_returned_runs(tiny_scene,
     for name in ("x", "y", "t", "p"):
         assert np.array_equal(getattr(a.events, name), getattr(b.events, name))
     np.testing.assert_array_equal(a.c2w, b.c2w)
-
-    flat = tmp_path / "returned"
-    flat.mkdir()
-    small = tmp_path / "small"
-    small.mkdir()
-    for name in ("fit.json", "config.yaml", "scene.yaml", "metrics.csv"):
-        (small / name).write_text(name)
-    with tarfile.open(flat / "scene-1.tar", "w") as tar:
-        for name in ("fit.json", "config.yaml", "scene.yaml", "metrics.csv"):
-            tar.add(small / name, arcname=name)
-    (flat / "scene-1.t00060.0-s9.pt").write_bytes(b"snapshot")
-    (run,) = gpu_pack.unpack(flat, tmp_path / "runs")
-    assert (run / "fit.json").read_text() == "fit.json"
-    assert (run / "snapshots" / "t00060.0-s9.pt").read_bytes() == b"snapshot"
+    with pytest.raises(SystemExit, match="no scene.json"):
+        pack_datasets.pack(tmp_path, tmp_path / "carry")
 
 
 def test_docs_benchmarks_is_generated_from_the_result_lines():
@@ -314,7 +248,7 @@ def test_variants_are_set_beside_their_preset_on_the_same_seeds():
     def line(preset, scene, seed, cd):
         return {**base, "preset": preset, "scene": scene, "seed": seed, "chamfer": cd}
 
-    off, spec = "fast priors.hull.enabled=false", "fast+train.view_balance=1"
+    off, spec = "fast priors.hull.enabled=false", "fast+train.lr=0.02"
     lines = [line("fast", "bunny", 0, 0.010), line("fast", "bunny", 1, 0.012),
              line("fast", "gen-cage-1", 0, 0.05), line("fast", "gen-cage-1", 1, 0.06),
              line(off, "bunny", 0, 0.02), line(off, "gen-cage-1", 0, None),
@@ -323,15 +257,15 @@ def test_variants_are_set_beside_their_preset_on_the_same_seeds():
               "commit": "def5678"}]
     text = "\n".join(report.variant_section(lines))
     header = ("| scene | seeds | CD `fast` | range | `priors.hull.enabled=false` "
-              "| `train.view_balance=1` |")
+              "| `train.lr=0.02` |")
     assert header in text
     # seed 0 against seed 0; worse beyond the preset's range of 0.002
     assert "| bunny | 2 | 0.0110 | 0.0100-0.0120 | 0.0200 (+100% ! +) | 0.0105 (+5%) |" in text
     assert "| gen-cage-1 | 2 | 0.0550 | 0.0500-0.0600 | empty | - |" in text
     assert "1 scene; 1 empty fit besides" in text
-    # a variant without its preset in the same run stays in the accuracy section
+    # a variant without its preset in the same run is on neither table
     assert "def5678" not in text
-    assert "def5678" in "\n".join(report.suite_section(lines))
+    assert "def5678" not in "\n".join(report.suite_section(lines))
     assert "priors.hull" not in "\n".join(report.suite_section(lines))
     # a table of two suite calls (one per seed) names both
     lines += [{**line("fast", "slab", 5, 0.09), "command": "run_suite.py --seeds 5"},
@@ -389,7 +323,7 @@ def test_the_kinds_with_few_events_get_their_own_mean():
     assert "| **mean, generated** | | | | **0.0150** | | **0.0100** |" in text
     assert "| **mean, generated, box/slab/cage/rods** | | | | **0.0200** | | **0.0100** |" in text
     accuracy = "\n".join(report.suite_section(lines))
-    assert "| **mean, generated, box/slab/cage/rods** | | **0.0100** |" in accuracy
+    assert "| **mean, generated, box/slab/cage/rods** | | | | **0.0100** |" in accuracy
     # the same fits scored over the crop: a budget, and means, of their own
     lines += [{**r, "volume": "crop", "chamfer": r["chamfer"] / 2} for r in lines]
     text = "\n".join(report.compare_section(lines, "aaa", "bbb"))
@@ -411,24 +345,6 @@ def test_speed_tables_give_each_field_a_column():
     assert first == "| fwd | 1.5 | 2 | yes |" and second == "| eikonal | 0.25 | - | - |"
 
 
-def test_floors_of_several_runs_are_shown_together_the_newest_per_mesh():
-    sys.path.insert(0, str(SUITE.parent))
-    import report
-
-    base = {"bench": "floor", "machine": {"cpu": "X"}, "threads": None, "kind": "cage",
-            "seed": 1, "date": "2026-12-02T03:00:00+00:00"}
-    rows = [{**base, "commit": "aaa", "command": "one", "dataset": "cage", "mesh": "cube",
-             "chamfer": 0.03},
-            {**base, "commit": "bbb", "command": "two", "dataset": "cage", "mesh": "cube",
-             "chamfer": 0.025},
-            {**base, "commit": "bbb", "command": "three", "dataset": "bunny", "mesh": "cube",
-             "chamfer": 0.008}]
-    text = "\n".join(report.speed_section({"floor": rows}))
-    assert "commit bbb," in text and "| cage | 1 | cage | cube | 0.025 |" in text
-    assert "0.03 |" not in text and "| cage | 1 | bunny | cube | 0.008 |" in text
-    assert "Command: `two`" in text and "Command: `three`" in text
-
-
 def test_readme_results_are_generated_from_one_commits_lines():
     sys.path.insert(0, str(SUITE.parent))
     import common
@@ -437,6 +353,29 @@ def test_readme_results_are_generated_from_one_commits_lines():
     lines = [r for r in common.read_lines(common.RESULTS / "suite.jsonl") if not r.get("dirty")]
     readme = report.README.read_text()
     assert readme == report.readme_text(readme, lines), "rerun benchmarks/report.py --readme"
+
+
+def test_the_accuracy_pages_table_is_generated_from_one_commits_lines():
+    sys.path.insert(0, str(SUITE.parent))
+    import common
+    import report
+
+    lines = [r for r in common.read_lines(common.RESULTS / "suite.jsonl") if not r.get("dirty")]
+    page = report.ACCURACY.read_text()
+    assert page == report._block_text(page, report.ACCURACY_START, lines,
+                                      report.accuracy_block), \
+        "rerun benchmarks/report.py --accuracy"
+    base = {"commit": "abc1234", "preset": "fast", "minutes": 15.0, "threads": 2,
+            "machine": {"cpu": "X"}, "steps": 100}
+    rows = [{**base, "scene": "gen-box-7", "seed": 0, "chamfer": 0.02, "accuracy": 0.01,
+             "completeness": 0.03, "fscore": 0.5, "chamfer_eventneus": 0.08},
+            {**base, "scene": "bunny", "seed": 0, "chamfer": 0.01, "steps": 200},
+            {**base, "scene": "bunny", "seed": 1, "chamfer": 0.03, "steps": 300},
+            {**base, "scene": "bunny", "seed": 2, "chamfer": 0.9, "preset": "fast+x=1"}]
+    _, _, bunny, box = report.accuracy_block(rows, "abc1234")
+    assert bunny == "| bunny | 15 min | X, 2 threads | 2 | 0.0200 | - | - | - | - | 250 |"
+    assert box == ("| gen-box-7 | 15 min | X, 2 threads | 1 | 0.0200 | 0.0100 | 0.0300 | "
+                   "0.500 | 0.0800 | 100 |")
 
 
 def test_readme_block_rows_summarise_assets_and_generated_objects():
@@ -534,10 +473,11 @@ def test_a_section_names_every_command_that_made_its_fits_once():
     lines.append({**base, "scene": "gen-box-1", "seed": 0,
                   "command": "python benchmarks/run_suite.py --generated 6"})
     text = "\n".join(report.suite_section(lines))
-    assert ("5 fits, 2026-11-26 to 2026-11-26; commands: `python benchmarks/compare_commits.py "
-            "aaa bbb`; `python benchmarks/run_suite.py --generated 6`") in text
+    assert ("\nCommand: `python benchmarks/compare_commits.py aaa bbb`  \nCommand: `python "
+            "benchmarks/run_suite.py --generated 6`\n") in text
     text = "\n".join(report.suite_section(lines[:2]))
-    assert "; command: `python benchmarks/compare_commits.py aaa bbb`\n" in text
+    assert text.count("Command: ") == 1
+    assert "\nCommand: `python benchmarks/compare_commits.py aaa bbb`\n" in text
 
 
 def test_clean_up_steps_are_set_beside_the_default_mesh_of_the_same_fits():
@@ -557,117 +497,6 @@ def test_clean_up_steps_are_set_beside_the_default_mesh_of_the_same_fits():
     assert report.cleanup_section(lines[2:]) == []
 
 
-def test_curves_come_from_suite_lines_of_several_commits(tmp_path):
-    """benchmarks/curves.py: one curve per COMMIT:PRESET line, side by side, from the run's
-    metrics.csv; a spec without a line is refused by name."""
-    import pytest
-
-    sys.path.insert(0, str(SUITE.parent))
-    spec = importlib.util.spec_from_file_location("curves", SUITE.parent / "curves.py")
-    curves = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(curves)
-    lines = []
-    for i, commit in enumerate(("aaa1111", "bbb2222")):
-        run = tmp_path / f"run{i}"
-        run.mkdir()
-        rows = ["step,loss/total,loss/event,inv_s,opacity"]
-        rows += [f"{s},{1 / s},{0.5 / s},{20 * (1 + s) ** (2 + i)},0.8" for s in range(1, 60)]
-        (run / "metrics.csv").write_text("\n".join(rows) + "\n")
-        lines.append({"scene": "blob", "preset": "fast", "seed": 1, "commit": commit,
-                      "dirty": False, "date": "2026-01-01", "minutes": 15, "steps": 59,
-                      "total_steps": 59, "restores": i, "chamfer": 0.01 + i,
-                      "run": str(run)})
-    results = tmp_path / "suite.jsonl"
-    results.write_text("".join(json.dumps(r) + "\n" for r in lines))
-    out = tmp_path / "curves.png"
-    assert curves.main(["blob", "--seed", "1", "bbb2222:fast", "aaa1111:fast", "--results",
-                        str(results), "--out", str(out)]) == 0
-    import cv2
-
-    image = cv2.imread(str(out))
-    one = curves.figure(lines[:1])
-    assert image.shape[0] == one.shape[0] and image.shape[1] == 2 * one.shape[1]
-    assert "1 restores | Chamfer 1.0100" in curves.caption(lines[1])
-    with pytest.raises(SystemExit, match="no clean line of blob seed 1 with preset 'fast' at c"):
-        curves.pick(lines, "blob", 1, "c:fast")
-    with pytest.raises(SystemExit, match="expected COMMIT:PRESET"):
-        curves.pick(lines, "blob", 1, "fast")
-
-
-def test_a_trained_step_is_timed_on_a_copy_of_a_finished_run(tiny_scene):
-    sys.path.insert(0, str(SUITE.parent))
-    import bench_trained_step
-
-    run = next(p for p in (tiny_scene / "runs").iterdir() if (p / "checkpoints").is_dir())
-    before = sorted(str(p.relative_to(run)) for p in run.rglob("*"))
-    threads, seconds, share = bench_trained_step.step_seconds(run, 2, None)
-    assert threads >= 1 and 0 < seconds < 60 and 0.0 <= share < 0.01
-    assert sorted(str(p.relative_to(run)) for p in run.rglob("*")) == before  # run untouched
-
-
-def test_the_opening_of_a_fit_is_recorded_per_seed(tiny_scene, tmp_path):
-    out = tmp_path / "early.jsonl"
-    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_early.py")),
-                           str(tiny_scene / "device"),
-                           "--seeds", "0", "1", "--steps", "3", "--iters", "40", "--variants", "",
-                           "priors.collapse_guard.enabled=false", "--allow-dirty", "--out",
-                           str(out)], capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    lines = [json.loads(line) for line in out.read_text().splitlines()]
-    assert [line["variant"] for line in lines] == ["fast", "priors.collapse_guard.enabled=false"]
-    for line in lines:
-        assert line["seeds"] == 2 and len(line["restores"]) == 2 and line["steps"] == 3
-        assert all(0.0 <= o <= 1.0 for o in line["occupied"])
-
-
-def test_the_collapse_blames_the_part_whose_parameters_moved(tiny_scene, tmp_path):
-    sys.path.insert(0, str(SUITE.parent))
-    import bench_collapse
-    import torch
-
-    from hybridneus.api import prepare
-
-    field = prepare(tiny_scene / "device", "fast", ["train.iters=2"], device="cpu")[0].field
-    a = {k: v.clone() for k, v in field.state_dict().items()}
-    b = {k: v.clone() for k, v in a.items()}
-    last = max(k for k in b if k.startswith("sdf_net.") and k.endswith(".bias"))
-    b[last][0] += 0.5  # the head's output bias lifts the whole SDF by 0.5
-    points = bench_collapse.crop_points(tuple(float(v) for v in field.crop), 4000)
-    base = bench_collapse.mixed(field, a, a, points)
-    head = bench_collapse.mixed(field, a, b, points)
-    grid = bench_collapse.mixed(field, b, a, points)
-    assert torch.allclose(head - base, torch.full_like(base, 0.5), atol=1e-5)
-    assert torch.equal(grid, base)
-    out = tmp_path / "collapse.jsonl"
-    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_collapse.py")),
-                           str(tiny_scene / "device"), "--seed", "0", "--iters", "40",
-                           "--at", "2", "4", "--allow-dirty", "--out", str(out)],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    (line,) = [json.loads(x) for x in out.read_text().splitlines()]
-    assert line["at"] == [2, 4] and 0.0 <= line["inside_at_a"] <= 1.0
-    assert {"shift_head_from_b", "shift_grid_from_b", "inside_both_from_b"} <= line.keys()
-
-
-def test_the_carving_of_a_fit_is_recorded_with_its_slices(tiny_scene, tmp_path):
-    out, image = tmp_path / "carving.jsonl", tmp_path / "carving.png"
-    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_carving.py")),
-                           str(tiny_scene / "device"), "--at", "2", "4", "--iters", "40",
-                           "--variants", "", "priors.hull.enabled=false", "--image", str(image),
-                           "--allow-dirty", "--out", str(out)],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    lines = [json.loads(line) for line in out.read_text().splitlines()]
-    assert [line["variant"] for line in lines] == ["fast", "priors.hull.enabled=false"]
-    for line in lines:
-        assert line["step"] == [2, 4]
-        assert all(0.0 <= v <= 1.0 for v in line["held"] + line["extra"])
-    from PIL import Image
-
-    # per variant a strip of two steps, each two 160-pixel slices with 4- and 6-pixel rules
-    assert Image.open(image).size == (2 * 160 + 6, 2 * (2 * 160 + 4 + 10))
-
-
 def test_face_errors_find_a_caved_face_and_its_side():
     import trimesh
 
@@ -682,35 +511,6 @@ def test_face_errors_find_a_caved_face_and_its_side():
     assert set(rows) == {"+x", "-x", "+y", "-y", "+z", "-z"}
     assert abs(rows["-z"]["median_signed"] + 0.03) < 0.003, rows["-z"]
     assert abs(rows["+z"]["median_signed"]) < 0.003, rows["+z"]
-
-
-def test_the_rare_fill_closes_a_hole_that_only_few_views_see():
-    from hybridneus.meshing import unseen as U
-    from hybridneus.model.analytic import TorusField
-
-    sys.path.insert(0, str(SUITE.parent))
-    spec = importlib.util.spec_from_file_location("bench_rare_fill",
-                                                  SUITE.parent / "bench_rare_fill.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    torus = TorusField(0.3, 0.12)  # lying flat: its hole looks up the y axis
-    angles = np.linspace(0, 2 * np.pi, 95, endpoint=False)
-    ring = np.stack([2 * np.cos(angles), np.zeros(95), 2 * np.sin(angles)], axis=1)
-    above = np.array([[0.1 * i, 2.0, 0.05] for i in range(5)])
-    cameras = np.concatenate([ring, above])  # 5% of the views look down into the hole
-    bounds = ((-0.6, -0.6, -0.6), (0.6, 0.6, 0.6))
-    base = U.unseen_space(torus, cameras, bounds, res=40)
-    grid = base.grid
-
-    def filled_at(unseen, point) -> bool:
-        i = np.round((np.asarray(point) - grid.origin) / grid.voxel).astype(int)
-        return bool(unseen.distance[tuple(i)] < 0)
-
-    assert not filled_at(base, (0, 0, 0))  # the views from above see the hole
-    fill = module.rare_fill(torus, cameras, base, share=0.1, close=0.25, stride=1)
-    assert filled_at(fill, (0, 0, 0)) and not filled_at(fill, (0.55, 0, 0))
-    none = module.rare_fill(torus, cameras, base, share=0.01, close=0.25, stride=1)
-    assert not filled_at(none, (0, 0, 0))
 
 
 def test_track_smoothing_is_scored_per_window_against_the_true_path(tmp_path):
@@ -749,7 +549,7 @@ def test_pose_lines_run_beside_other_work_show_no_step_time():
     shared = dict(line, alone=False, step_time_ratio=None, exact_step_time_ratio=None)
     rows = [row for row in report.poses_section([alone, shared]) if row.startswith("| ")]
     cells = [[c.strip() for c in row.split("|")] for row in rows[-2:]]
-    column = rows[0].split("|").index(" step time refined / given ")
+    column = rows[0].split("|").index(" step time smoothed / given ")
     assert cells[0][column] == "1.02" and cells[0][column + 1] == "0.88"
     assert cells[1][column] == "-" and cells[1][column + 1] == "-"
 
@@ -773,47 +573,89 @@ def test_a_simulated_variant_is_named_by_its_settings_and_made_once(tmp_path):
     assert (folder / "scene.json").stat().st_mtime_ns == stamp  # the cached copy is kept
 
 
-def test_the_probe_is_repeated_per_count_of_timed_steps(tiny_scene, tmp_path):
-    out = tmp_path / "probe.jsonl"
-    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_probe.py")),
-                           str(tiny_scene / "device"), "--repeats", "2", "--steps", "1", "5",
-                           "--threads", "1", "--allow-dirty", "--out", str(out)],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    lines = [json.loads(line) for line in out.read_text().splitlines()]
-    assert [line["steps_per_point"] for line in lines] == [1, 5]
-    assert [line["default"] for line in lines] == [False, True]
-    for line in lines:
-        assert line["repeats"] == 2 and 0 < line["min_ms"] <= line["mean_step_ms"]
-        assert line["mean_step_ms"] <= line["max_ms"] and line["variation"] >= 0
-
-
-def test_part_errors_name_the_part_a_mesh_lacks(tmp_path, capsys):
-    """benchmarks/part_errors.py: a mesh with the base and without the rod recalls the base
-    whole and none of the rod; a run folder without its mesh is named."""
-    import trimesh
-
+def test_lines_of_removed_experiments_stay_out_of_the_page(tmp_path, monkeypatch):
+    """A line made with a key removed from the config, at another value than the default it
+    had, cannot be repeated today: the report leaves it out (the results file keeps it); at
+    that default the setting is today's behaviour and the line stays."""
     sys.path.insert(0, str(SUITE.parent))
-    spec = importlib.util.spec_from_file_location("part_errors", SUITE.parent / "part_errors.py")
-    part_errors = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(part_errors)
-    base = trimesh.creation.box(extents=(0.8, 0.1, 0.5))
-    rod = trimesh.creation.box(extents=(0.03, 0.6, 0.03))
-    rod.apply_translation((0.2, 0.4, 0.0))
-    data, run = tmp_path / "data", tmp_path / "run"
-    data.mkdir()
-    run.mkdir()
-    trimesh.util.concatenate([base, rod]).export(data / "gt_mesh.ply")
-    base.export(run / "mesh.ply")
-    line = {"scene": "rods", "preset": "fast", "seed": 1, "commit": "abc1234", "dirty": False,
-            "date": "2026-01-01", "iters": 100, "steps": 100, "minutes": 0, "chamfer": 0.05,
-            "run": str(run), "dataset": str(data)}
-    results = tmp_path / "suite.jsonl"
-    results.write_text(json.dumps(line) + "\n")
-    part_errors.main(["rods", "--presets", "fast", "--seed", "1", "--results", str(results)])
-    rows = [r.split("|")[1:-1] for r in capsys.readouterr().out.splitlines()[2:]]
-    assert [(int(r[3]), float(r[5])) for r in rows] == [(0, 1.0), (1, 0.0)]  # base, rod
-    assert float(rows[1][6]) > 0.1  # the rod's samples lie far from the base
-    (run / "mesh.ply").unlink()
-    with pytest.raises(SystemExit, match=r"run/mesh.ply: missing"):
-        part_errors.main(["rods", "--presets", "fast", "--seed", "1", "--results", str(results)])
+    import common
+    import report
+
+    assert common.settings_of({"preset": "fast+train.lr=0.02+grid.n_levels=8",
+                               "overrides": ["train.seed=1"]}) == [
+        "train.lr=0.02", "grid.n_levels=8", "train.seed=1"]
+    assert common.settings_of({"preset": "fast priors.hull.enabled=false"}) == [
+        "priors.hull.enabled=false"]
+    assert not common.reruns_today({"preset": "fast+train.lr_sdf_head=0.1"})
+    assert common.reruns_today({"preset": "fast+train.lr_sdf_head=1.0"})
+    assert not common.reruns_today({"refine_sets": ["refine.pose_knots=21"]})
+    assert common.reruns_today({"refine_sets": ["refine.poses=false",
+                                                "refine.pose_smoothing=41"]})
+
+    def line(preset, cd, commit="aaa", date="2026-01-01T00:00:00+00:00"):
+        return {"bench": "suite", "commit": commit, "dirty": False, "date": date,
+                "scene": "bunny", "seed": 0, "preset": preset, "minutes": 15.0, "steps": 9000,
+                "chamfer": cd, "fit_wall_s": 900, "machine": {"cpu": "cpu x"}, "threads": 2,
+                "command": "python benchmarks/run_suite.py"}
+
+    lines = [line("fast", 0.0120), line("fast+train.lr_sdf_head=0.1", 0.0110),
+             line("fast+priors.hull.enabled=false", 0.0150)]
+    monkeypatch.setattr(common, "RESULTS", tmp_path)
+    (tmp_path / "suite.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    text = report.build([])
+    assert "lr_sdf_head" not in text and "0.0110" not in text
+    assert "`priors.hull.enabled=false`" in text and "0.0150" in text
+
+
+def test_the_page_shows_the_newest_commit_of_each_group_with_both_protocols(tmp_path,
+                                                                             monkeypatch):
+    sys.path.insert(0, str(SUITE.parent))
+    import common
+    import report
+
+    def line(commit, date, cd, **extra):
+        return {"bench": "suite", "commit": commit, "dirty": False, "date": date,
+                "scene": "bunny", "seed": 0, "preset": "fast", "minutes": 15.0, "steps": 9000,
+                "chamfer": cd, "fit_wall_s": 900, "machine": {"cpu": "cpu x"}, "threads": 2,
+                "command": "python benchmarks/run_suite.py", **extra}
+
+    lines = [line("old", "2026-01-01T00:00:00+00:00", 0.0200),
+             line("new", "2026-02-01T00:00:00+00:00", 0.0120, floor=0.0010,
+                  chamfer_eventneus=0.0450, floor_eventneus=0.0040)]
+    monkeypatch.setattr(common, "RESULTS", tmp_path)
+    (tmp_path / "suite.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    text = report.build([])
+    assert "| old |" not in text and "0.0200" not in text  # the older commit's fit
+    assert ("| scene | commit | date | seeds | CD mean | CD range | F@1% | floor | CD eventneus "
+            "| floor eventneus |") in text
+    assert ("| bunny | new | 2026-02-01 | 1 | 0.0120 | - | - | 0.0010 | 0.0450 | 0.0040 | 9000 "
+            "| 900 | - |") in text
+    # a comparison names its commits and pairs them, whatever is newest
+    assert "| bunny | fast | 15 min | 1 | 0.0200 | - | 0.0120 |" in report.build(
+        [("old", "new")])
+
+
+def test_a_budget_on_a_busy_machine_is_recorded_with_its_replans(tiny_scene, tmp_path):
+    """bench_budget.py: a --minutes fit with a spinning process beside it for its start, and
+    one alone; each line names the steps, re-plans, paces, wall time and the share used."""
+    out = tmp_path / "budget.jsonl"
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_budget.py")),
+                           str(tiny_scene / "device"), "--minutes", "0.25", "--busy", "0.05",
+                           "--hogs", "1", "--threads", "1", "--quiet-too", "--allow-dirty",
+                           "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    quiet, busy = (json.loads(x) for x in out.read_text().splitlines())
+    assert (quiet["busy_minutes"], quiet["hogs"]) == (0.0, 0)
+    assert (busy["busy_minutes"], busy["hogs"]) == (0.05, 1)
+    for line in (quiet, busy):
+        assert line["bench"] == "budget" and 1 <= line["steps"] <= line["planned"]
+        assert isinstance(line["replans"], int) and line["wall_s"] > 0
+        assert line["used"] == pytest.approx(line["wall_s"] / 15.0, rel=0.01)
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    table = report.budget_section([quiet, busy])
+    assert any("| 0.05 min, 1 processes |" in row for row in table)
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_budget.py")),
+                           str(tmp_path), "--allow-dirty"], capture_output=True, text=True)
+    assert proc.returncode != 0 and "no scene.json" in proc.stderr
