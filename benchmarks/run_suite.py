@@ -188,7 +188,12 @@ def _job() -> None:
     ap.add_argument("--fit-only", action="store_true")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     job = ap.parse_args(sys.argv[2:])
-    run_dir = suite_jobs.fit_run(job, PROCESS_START)
+    from hybridneus.errors import HybridNeusError
+
+    try:
+        run_dir = suite_jobs.fit_run(job, PROCESS_START)
+    except HybridNeusError as exc:  # a bad setting or dataset: one line, as the CLI says it
+        raise SystemExit(f"error: {exc}") from None
     if job.fit_only:
         report = {**json.loads((run_dir / "fit.json").read_text()), "run": str(run_dir)}
     else:

@@ -143,20 +143,15 @@ class BudgetPlan:
     against the ``costs`` predicted for it, and resizes the trainer's
     :class:`~hybridneus.training.schedules.Timeline` (and its scene record's ``steps``) to
     the steps that fit the time to ``end`` (a ``clock()`` value) at that pace. The progress
-    reached stays where it is: every schedule goes on from there at the new rate.
-
-    Attributes:
-        replans: how many re-plans changed the schedule's length.
-        paces: the slowest and the fastest stretch measured, as multiples of the probe's
-            time (``None`` before the first).
+    reached stays where it is: every schedule goes on from there at the new rate. The record
+    counts the re-plans that changed the length (``replans``) and keeps the slowest and
+    fastest pace measured (``paces``, multiples of the probe's time).
     """
 
     costs: StepCosts
     end: float
     every: float
     clock: Callable[[], float] = time.perf_counter
-    replans: int = 0
-    paces: tuple[float, float] | None = None
     _mark: tuple[int, float, float] | None = None
 
     def start(self, step: int, p: float = 0.0) -> None:
@@ -179,9 +174,8 @@ class BudgetPlan:
         self._mark = (trainer.step, now, p)
         predicted = self.costs.mean(p0, p) * done
         pace = (now - t0) / predicted if predicted > 0 else 1.0
-        lo, hi = self.paces or (pace, pace)
-        self.paces = (min(lo, pace), max(hi, pace))
-        trainer.record.paces = [round(v, 3) for v in self.paces]
+        lo, hi = trainer.record.paces or (pace, pace)
+        trainer.record.paces = [round(min(lo, pace), 3), round(max(hi, pace), 3)]
         rest = self.costs.mean(p) * pace * HEADROOM
         fits = trainer.step + max(1, int(left / rest)) if left > 0 else trainer.step + 1
         if fits == trainer.total_steps:
@@ -191,7 +185,7 @@ class BudgetPlan:
             trainer.step, trainer.total_steps, fits, done, pace)
         trainer.timeline.resize(trainer.step, fits)
         trainer.record.steps = fits
-        trainer.record.replans = self.replans = self.replans + 1
+        trainer.record.replans += 1
 
 
 def budget_steps(trainer, seconds: float,
