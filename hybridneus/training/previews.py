@@ -155,10 +155,10 @@ def write_curve(history: list[dict[str, float]], path: Path, size=(480, 400)) ->
     _write_png(path, img)
 
 
-def write_pose_corrections(degrees: np.ndarray, moved: np.ndarray, path: Path,
-                           size=(480, 300)) -> None:
-    """Each view's learned pose correction as a PNG: above, its rotation (degrees); below,
-    how far it moved the camera centre (world units), both against the view index."""
+def write_pose_changes(degrees: np.ndarray, moved: np.ndarray, path: Path,
+                       size=(480, 300)) -> None:
+    """How far the trained track moved each view from the given one, as a PNG: above, the
+    rotation (degrees); below, the camera centre's shift (world units), against the view."""
     w, h = size
     img = np.full((h, w, 3), 255, np.uint8)
     pad, mid = 30, h // 2

@@ -124,14 +124,14 @@ class RunLogger:
         import numpy as np
 
         from hybridneus.data.track import pose_errors
-        from hybridneus.training.previews import write_pose_corrections
+        from hybridneus.training.previews import write_pose_changes
 
         given = np.asarray(trainer.data.given_c2w, dtype=np.float64)
         with atomic_path(self.run_dir / POSES) as tmp:
             np.savez(tmp, given=given, refined=refined,
                      views=np.asarray(trainer.split.view_names))
         degrees, moved = pose_errors(refined, given)
-        write_pose_corrections(degrees, moved, self.run_dir / "previews" / "poses.png")
+        write_pose_changes(degrees, moved, self.run_dir / "previews" / "poses.png")
 
     def preview(self, trainer) -> None:
         """Write ``previews/step_<n>.png`` and ``previews/curve.png``."""
