@@ -647,6 +647,22 @@ def threshold_section(rows: list[dict]) -> list[str]:
     return out + _command_lines(rows)
 
 
+def busy_tests_section(rows: list[dict]) -> list[str]:
+    """bench_busy_tests.py: the default test run beside processes spinning every core."""
+    if not rows:
+        return []
+    r = rows[-1]
+    return ["## The tests on a busy machine", "",
+            "`python -m pytest -q` (the README's test command) while processes spin every core "
+            "beside it. Target: every test passes, as on a quiet machine; no test depends on "
+            "the machine's speed.", "",
+            "| spinning processes | passed | failed | errors | wall s | commit | machine | date |",
+            "|---|---|---|---|---|---|---|---|",
+            f"| {r['hogs']} | {r['passed']} | {r['failed']} | {r['errors']} | "
+            f"{r['wall_s']:.0f} | {r['commit']} | {_cpu(r)} | {r['date'][:10]} |", "",
+            f"Command: `{r['command']}`", ""]
+
+
 def reliability_section(rows: list[dict]) -> list[str]:
     """reliability.py: bad inputs and faults tried as commands (its latest clean line)."""
     if not rows:
@@ -758,6 +774,7 @@ def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple
     out += track_section(results.get("track", []))
     out += threshold_section(results.get("threshold", []))
     out += budget_section(results.get("budget", []))
+    out += busy_tests_section(results.get("busy_tests", []))
     out += reliability_section(results.get("reliability", []))
     out += speed_section(results)
     return "\n".join(out).rstrip() + "\n"

@@ -659,3 +659,20 @@ def test_a_budget_on_a_busy_machine_is_recorded_with_its_replans(tiny_scene, tmp
     proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_budget.py")),
                            str(tmp_path), "--allow-dirty"], capture_output=True, text=True)
     assert proc.returncode != 0 and "no scene.json" in proc.stderr
+
+
+def test_a_busy_test_run_is_counted_from_pytests_summary():
+    """bench_busy_tests.py reads pytest's closing line; the report shows the newest run."""
+    sys.path.insert(0, str(SUITE.parent))
+    import bench_busy_tests
+    import report
+
+    assert bench_busy_tests.counts("610 passed, 7 deselected, 3 warnings in 1301.45s") == {
+        "passed": 610, "failed": 0, "errors": 0, "skipped": 0, "deselected": 7}
+    assert bench_busy_tests.counts("2 failed, 5 passed, 1 error in 3.0s") == {
+        "passed": 5, "failed": 2, "errors": 1, "skipped": 0, "deselected": 0}
+    line = {"hogs": 2, "passed": 610, "failed": 0, "errors": 0, "wall_s": 1301.4,
+            "commit": "abc1234", "machine": {"cpu": "X"}, "threads": None,
+            "date": "2026-12-06T00:00:00+00:00", "command": "python bench_busy_tests.py"}
+    assert "| 2 | 610 | 0 | 0 | 1301 | abc1234 | X, all threads | 2026-12-06 |" in \
+        report.busy_tests_section([line])
