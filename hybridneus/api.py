@@ -168,6 +168,10 @@ def prepare(
 
 #: A budget that leaves fewer steps than this is refused rather than trained on.
 MIN_BUDGET_STEPS = 10
+#: Seconds a budget keeps, beyond the final checkpoint, for what follows the last step (the
+#: training curve, the scene record, the command's exit): a fit re-planned to its deadline
+#: otherwise ends a second past its budget.
+FINISH_SECONDS = 2.0
 
 
 def _set_threads(cfg: Config) -> None:
@@ -199,8 +203,8 @@ def _fix_budget(trainer, logger, end: float) -> None:
             tick = time.perf_counter()
             logger.preview(trainer)
             overhead += (time.perf_counter() - tick) / t.preview_every
-    # the final checkpoint and curve come after the last step
-    left = end - time.perf_counter() - 2.0 * save - 0.5
+    # the final checkpoint, curve and record come after the last step
+    left = end - time.perf_counter() - 2.0 * save - FINISH_SECONDS
     steps, how, costs = budget_steps(trainer, max(left, 0.0), overhead)
     if steps < MIN_BUDGET_STEPS:
         spent = t.minutes * 60.0 - (end - time.perf_counter())
@@ -209,7 +213,7 @@ def _fix_budget(trainer, logger, end: float) -> None:
                           "--iters")
     trainer.total_steps = trainer.record.steps = steps
     trainer.record.steps_from = how
-    trainer.deadline = end - save - 0.5
+    trainer.deadline = end - save - FINISH_SECONDS
     trainer.plan = BudgetPlan(costs, trainer.deadline, REPLAN_SHARE * max(left, 0.0),
                               clock=trainer.clock)
 
