@@ -421,11 +421,11 @@ README_START = "<!-- results: python benchmarks/report.py --readme "
 README_END = "<!-- end of results -->"
 
 
-def readme_block(lines: list[dict], commit: str) -> list[str]:
-    """The README's results table: every suite group of one commit, one row each."""
+def readme_block(lines: list[dict], commits: list[str]) -> list[str]:
+    """The README's results table: every suite group of the commits' lines, one row each."""
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in lines:
-        if r["commit"] == commit:
+        if r["commit"] in commits:
             groups[(r["preset"], _budget(r), _cpu(r))].append(r)
     out = ["| preset | budget | machine | assets: mean CD | generated: mean CD | steps |",
            "|---|---|---|---|---|---|"]
@@ -466,33 +466,34 @@ ACCURACY = common.REPO / "docs" / "accuracy.md"
 ACCURACY_START = "<!-- scenes: python benchmarks/report.py --accuracy "
 
 
-def accuracy_block(lines: list[dict], commit: str) -> list[str]:
+def accuracy_block(lines: list[dict], commits: list[str]) -> list[str]:
     """docs/accuracy.md's table: per scene (assets, then generated objects) and budget, the
-    commit's plain ``fast`` fits averaged over their seeds, by both protocols."""
-    rows = [r for r in lines if r["commit"] == commit and r["preset"] == "fast"
+    commits' plain ``fast`` fits averaged over their seeds, by both protocols."""
+    rows = [r for r in lines if r["commit"] in commits and r["preset"] == "fast"
             and r.get("chamfer") is not None]
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in rows:
         groups[(r["scene"].startswith("gen-"), r["scene"], _budget(r), _cpu(r))].append(r)
     out = ["| scene | budget | machine | seeds | Chamfer | accuracy | completeness | F@1% "
-           "| Chamfer, eventneus protocol | steps |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "| Chamfer, eventneus protocol | steps | commit |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for (_, scene, budget, cpu), rs in sorted(groups.items()):
         cells = [_f(_mean_of(rs, k)) for k in ("chamfer", "accuracy", "completeness")]
+        made = ", ".join(sorted({r["commit"] for r in rs}))
         out.append(f"| {scene} | {budget} | {cpu} | {len(rs)} | {' | '.join(cells)} | "
                    f"{_f(_mean_of(rs, 'fscore'), 3)} | {_f(_mean_of(rs, 'chamfer_eventneus'))} "
-                   f"| {round(statistics.mean(r['steps'] for r in rs))} |")
+                   f"| {round(statistics.mean(r['steps'] for r in rs))} | {made} |")
     return out
 
 
 def _block_text(text: str, marker: str, lines: list[dict], block) -> str:
-    """``text`` with the generated block after ``marker`` (which names a commit) made anew,
+    """``text`` with the generated block after ``marker`` (which names its commits) made anew,
     up to :data:`README_END`."""
     start = text.index(marker)
-    commit = text[start + len(marker):].split(" ", 1)[0]
+    commits = text[start + len(marker):].split(" -->", 1)[0].split()
     head_end = text.index("\n", start) + 1
     end = text.index(README_END, head_end)
-    return text[:head_end] + "\n".join(block(lines, commit)) + "\n" + text[end:]
+    return text[:head_end] + "\n".join(block(lines, commits)) + "\n" + text[end:]
 
 
 def recordings_section(rows: list[dict]) -> list[str]:
@@ -789,26 +790,27 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=DOC)
     ap.add_argument("--check", action="store_true",
                     help="exit 1 if the page differs from what the lines give")
-    ap.add_argument("--readme", metavar="COMMIT",
-                    help="also write README.md's results table from COMMIT's suite lines")
-    ap.add_argument("--accuracy", metavar="COMMIT",
-                    help="also write docs/accuracy.md's table of scenes from COMMIT's lines")
+    ap.add_argument("--readme", metavar="COMMIT", nargs="+",
+                    help="also write README.md's results table from the commits' suite lines")
+    ap.add_argument("--accuracy", metavar="COMMIT", nargs="+",
+                    help="also write docs/accuracy.md's table of scenes from the commits' lines")
     args = ap.parse_args()
     suite = [r for r in common.read_lines(common.RESULTS / "suite.jsonl") if not r.get("dirty")]
-    for commit, path, marker, block in ((args.readme, README, README_START, readme_block),
-                                        (args.accuracy, ACCURACY, ACCURACY_START,
-                                         accuracy_block)):
-        if not commit:
+    for commits, path, marker, block in ((args.readme, README, README_START, readme_block),
+                                         (args.accuracy, ACCURACY, ACCURACY_START,
+                                          accuracy_block)):
+        if not commits:
             continue
         current = path.read_text()
         start = current.index(marker) + len(marker)
-        end = current.index(" ", start)
-        text = _block_text(current[:start] + commit + current[end:], marker, suite, block)
+        end = current.index(" -->", start)
+        text = _block_text(current[:start] + " ".join(commits) + current[end:], marker, suite,
+                           block)
         if args.check and text != current:
             raise SystemExit(f"{path}: results out of date; rerun the report")
         if not args.check:
             path.write_text(text)
-            print(f"wrote {path}'s results for {commit}")
+            print(f"wrote {path}'s results for {' '.join(commits)}")
     text = build([tuple(c) for c in args.compare], [tuple(c) for c in args.same_as])
     if args.check:
         same = args.out.is_file() and args.out.read_text() == text

@@ -345,7 +345,7 @@ def test_speed_tables_give_each_field_a_column():
     assert first == "| fwd | 1.5 | 2 | yes |" and second == "| eikonal | 0.25 | - | - |"
 
 
-def test_readme_results_are_generated_from_one_commits_lines():
+def test_readme_results_are_generated_from_their_commits_lines():
     sys.path.insert(0, str(SUITE.parent))
     import common
     import report
@@ -355,7 +355,7 @@ def test_readme_results_are_generated_from_one_commits_lines():
     assert readme == report.readme_text(readme, lines), "rerun benchmarks/report.py --readme"
 
 
-def test_the_accuracy_pages_table_is_generated_from_one_commits_lines():
+def test_the_accuracy_pages_table_is_generated_from_its_commits_lines():
     sys.path.insert(0, str(SUITE.parent))
     import common
     import report
@@ -372,10 +372,17 @@ def test_the_accuracy_pages_table_is_generated_from_one_commits_lines():
             {**base, "scene": "bunny", "seed": 0, "chamfer": 0.01, "steps": 200},
             {**base, "scene": "bunny", "seed": 1, "chamfer": 0.03, "steps": 300},
             {**base, "scene": "bunny", "seed": 2, "chamfer": 0.9, "preset": "fast+x=1"}]
-    _, _, bunny, box = report.accuracy_block(rows, "abc1234")
-    assert bunny == "| bunny | 15 min | X, 2 threads | 2 | 0.0200 | - | - | - | - | 250 |"
+    rows.append({**rows[0], "commit": "def5678", "scene": "gen-cage-3"})
+    rows.append({**rows[0], "commit": "0000000", "scene": "gen-slab-5"})  # not named
+    _, _, bunny, box, cage = report.accuracy_block(rows, ["abc1234", "def5678"])
+    assert bunny == ("| bunny | 15 min | X, 2 threads | 2 | 0.0200 | - | - | - | - | 250 | "
+                     "abc1234 |")
     assert box == ("| gen-box-7 | 15 min | X, 2 threads | 1 | 0.0200 | 0.0100 | 0.0300 | "
-                   "0.500 | 0.0800 | 100 |")
+                   "0.500 | 0.0800 | 100 | abc1234 |")
+    assert cage.startswith("| gen-cage-3 |") and cage.endswith("| def5678 |")
+    page = (f"{report.ACCURACY_START}abc1234 def5678 -->\nold\n{report.README_END}\n")
+    assert "gen-cage-3" in report._block_text(page, report.ACCURACY_START, rows,
+                                              report.accuracy_block)
 
 
 def test_readme_block_rows_summarise_assets_and_generated_objects():
@@ -388,12 +395,12 @@ def test_readme_block_rows_summarise_assets_and_generated_objects():
              {**base, "scene": "bunny", "seed": 1, "chamfer": 0.03},
              {**base, "scene": "gen-box-7", "seed": 0, "chamfer": 0.05, "steps": 90},
              {**base, "scene": "bunny", "seed": 0, "chamfer": 0.5, "commit": "other"}]
-    _, _, row = report.readme_block(lines, "abc1234")
+    _, _, row = report.readme_block(lines, ["abc1234"])
     assert row == ("| `fast` | 15 min | X, 2 threads | 0.0200 (1 asset, 2 seeds) | "
                    "0.0500 (1 object, 1 seed) | 90-100 |")
     # a scene fitted with more seeds does not weigh more: (0.02 + 0.04) / 2, not 0.08 / 3
     lines.append({**base, "scene": "xylophone", "seed": 0, "chamfer": 0.04})
-    _, _, row = report.readme_block(lines, "abc1234")
+    _, _, row = report.readme_block(lines, ["abc1234"])
     assert "| 0.0300 (2 assets, 1-2 seeds) |" in row
 
 
