@@ -265,6 +265,9 @@ def test_variants_are_set_beside_their_preset_on_the_same_seeds():
     assert "1 scene; 1 empty fit besides" in text
     # a variant without its preset in the same run is on neither table
     assert "def5678" not in text
+    # a variant that sets a key removed from the config is on none, even at its old default
+    removed = line("fast+render.empty_share=0", "bunny", 0, 0.011)
+    assert "empty_share" not in "\n".join(report.variant_section(lines + [removed]))
     assert "def5678" not in "\n".join(report.suite_section(lines))
     assert "priors.hull" not in "\n".join(report.suite_section(lines))
     # a table of two suite calls (one per seed) names both
@@ -285,7 +288,7 @@ def test_an_older_commit_stands_in_only_where_it_fits_alike():
         return {**base, "commit": commit, "preset": preset, "scene": "bunny", "seed": seed,
                 "chamfer": cd}
 
-    es = "fast+render.empty_share=0.25"
+    es = "fast+train.lr=0.02"
     lines = [line("old1234", "fast", 1, 0.010), line("old1234", "fast", 2, 0.012),
              line("old1234", "fast priors.hull.enabled=false", 2, 0.5),
              line("new5678", "fast", 1, 0.010), line("new5678", es, 1, 0.009),
@@ -655,7 +658,9 @@ def test_a_budget_on_a_busy_machine_is_recorded_with_its_replans(tiny_scene, tmp
     assert (quiet["busy_minutes"], quiet["hogs"]) == (0.0, 0)
     assert (busy["busy_minutes"], busy["hogs"]) == (0.05, 1)
     for line in (quiet, busy):
-        assert line["bench"] == "budget" and 1 <= line["steps"] <= line["planned"]
+        # a 15 s budget on a loaded machine may end before its first step: the line must
+        # still say so truthfully
+        assert line["bench"] == "budget" and 0 <= line["steps"] <= line["planned"]
         assert isinstance(line["replans"], int) and line["wall_s"] > 0
         assert line["used"] == pytest.approx(line["wall_s"] / 15.0, rel=0.01)
     sys.path.insert(0, str(SUITE.parent))
