@@ -180,13 +180,20 @@ def reruns_today(line: dict[str, Any]) -> bool:
 
     from hybridneus.config.overrides import REMOVED_KEYS
 
-    for setting in settings_of(line):
-        key, _, text = setting.partition("=")
-        if key in REMOVED_KEYS:
-            try:
-                value = yaml.safe_load(text)
-            except yaml.YAMLError:
-                return False
-            if value != REMOVED_KEYS[key][0]:
-                return False
+    for key, text in removed_settings(line):
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            return False
+        if value != REMOVED_KEYS[key][0]:
+            return False
     return True
+
+
+def removed_settings(line: dict[str, Any]) -> list[tuple[str, str]]:
+    """The (key, value text) settings of a result line whose key was removed from the config
+    (``REMOVED_KEYS``)."""
+    from hybridneus.config.overrides import REMOVED_KEYS
+
+    pairs = (s.partition("=") for s in settings_of(line))
+    return [(key, text) for key, _, text in pairs if key in REMOVED_KEYS]

@@ -318,12 +318,6 @@ def stand_in(lines: list[dict], old: str, new: str) -> tuple[list[dict], int]:
     return [*lines, *copies], len(both)
 
 
-def _sets_removed_key(line: dict) -> bool:
-    from hybridneus.config.overrides import REMOVED_KEYS
-
-    return any(s.partition("=")[0] in REMOVED_KEYS for s in common.settings_of(line))
-
-
 def variant_section(lines: list[dict],
                     same_as: list[tuple[str, str]] | tuple = ()) -> list[str]:
     """Variants (a preset with overrides) against their preset's fits of the same commit,
@@ -333,7 +327,7 @@ def variant_section(lines: list[dict],
     stand in for those ``new`` lacks, and the table says so."""
     # a variant that sets a key removed from the config is no switch a user has, and its
     # preset's fits of that commit may have run with the removed part at another value
-    lines = [r for r in lines if not _sets_removed_key(r)]
+    lines = [r for r in lines if not common.removed_settings(r)]
     repeats: dict[str, tuple[str, int]] = {}
     for old, new in same_as:
         lines, n = stand_in(lines, old, new)
