@@ -33,7 +33,12 @@ def evaluate(
     no_sdf: Annotated[bool, typer.Option("--no-sdf", help="Skip SDF-MAE.")] = False,
     parts: Annotated[
         bool, typer.Option("--parts", help="Also say how much of each connected part of GT "
-                           "the mesh recovers (recall at --threshold, mean distance).")
+                           "the mesh recovers (recall at --threshold, mean distance), and how "
+                           "far each connected part of the mesh lies from GT (floaters).")
+    ] = False,
+    planes: Annotated[
+        bool, typer.Option("--planes", help="Also say how flat the mesh keeps each planar face "
+                           "of GT (RMS and median signed distance to the face's plane).")
     ] = False,
     errors: Annotated[
         Path | None,
@@ -82,10 +87,18 @@ def evaluate(
             {"sdf_mae": mae.mae, "sdf_mae_near": mae.mae_near, "sdf_mae_uniform": mae.mae_uniform}
         )
     if parts:
-        from hybridneus.evaluation.parts import part_completeness
+        from hybridneus.evaluation.parts import component_distances, part_completeness
 
         result["parts"] = [p.as_dict() for p in part_completeness(
             pred_mesh, gt_mesh, threshold=threshold, n_samples=2 * samples, seed=seed)]
+        result["components"] = [c.as_dict() for c in component_distances(
+            pred_mesh, gt_mesh, n_samples=2 * samples, seed=seed)]
+    if planes:
+        from hybridneus.evaluation.planes import plane_errors, plane_rms
+
+        faces = plane_errors(pred_mesh, gt_mesh, seed=seed)
+        result["planes"] = [f.as_dict() for f in faces]
+        result["plane_rms"] = plane_rms(faces)
     result["seconds"] = round(time.perf_counter() - start, 3)
     if errors is not None:
         from hybridneus.evaluation import save_error_image
@@ -121,5 +134,22 @@ def evaluate(
                             " x ".join(f"{e:.3f}" for e in p["extents"]),
                             f"{p['recall']:.2f}", f"{p['completeness']:.4f}")
         Console().print(by_part)
+        far = max(result["components"], key=lambda c: c["distance"], default=None)
+        if far is not None:
+            typer.echo(f"mesh: {len(result['components'])} connected parts; the farthest from "
+                       f"GT (median distance) is part {far['index']}, {far['distance']:.4f} "
+                       f"away, {far['faces']} faces")
+    if planes:
+        by_face = Table(title=f"GT planar faces, largest first: pooled RMS "
+                        f"{result['plane_rms']:.5f} (offset: median signed, + outside)")
+        for column in ("face", "area", "normal", "RMS", "offset", "coverage"):
+            by_face.add_column(column, justify="right")
+        for f in result["planes"]:
+            by_face.add_row(str(f["index"]), f"{f['area']:.4f}",
+                            " ".join(f"{v:+.2f}" for v in f["normal"]), f"{f['rms']:.5f}",
+                            f"{f['offset']:+.5f}", f"{f['coverage']:.2f}")
+        if not result["planes"]:
+            by_face.add_row("none", "-", "-", "-", "-", "-")
+        Console().print(by_face)
     if errors is not None:
         typer.echo(f"error picture: {result['errors']}")

@@ -65,6 +65,9 @@ def test_fit_only_then_score_runs_elsewhere(tiny_scene, tmp_path):
     assert line["preset"] == " ".join(["fast", *sets[1::2]])  # a variant is named apart
     assert [c[1] for c in line["curve"]] == [3, 6] and line["steps"] == 6
     assert (moved / "mesh.ply").is_file() == (line["chamfer"] is not None)
+    if line["chamfer"] is not None:  # what Chamfer mixes, apart
+        assert {"part_recall", "farthest_part"} <= set(line)
+        assert "plane_rms" not in line or [c[1] for c in line["plane_curve"]] == [3, 6]
     # scored with and without each mesh clean-up, and stamped
     assert {"chamfer_unfilled", "chamfer_cavities", "chamfer_ungrouped", "commit", "date",
             "machine"} <= set(line)
@@ -324,9 +327,9 @@ def test_the_kinds_with_few_events_get_their_own_mean():
                               ("aaa", "gen-blob-2", 0.01), ("bbb", "gen-blob-2", 0.01))]
     text = "\n".join(report.compare_section(lines, "aaa", "bbb"))
     assert "| **mean, generated** | | | | **0.0150** | | **0.0100** |" in text
-    assert "| **mean, generated, box/slab/cage/rods** | | | | **0.0200** | | **0.0100** |" in text
+    assert "| **mean, generated, box/slab/cage/rods/device/birdcage** | | | | **0.0200** | | **0.0100** |" in text
     accuracy = "\n".join(report.suite_section(lines))
-    assert "| **mean, generated, box/slab/cage/rods** | | | | **0.0100** |" in accuracy
+    assert "| **mean, generated, box/slab/cage/rods/device/birdcage** | | | | **0.0100** |" in accuracy
     # the same fits scored over the crop: a budget, and means, of their own
     lines += [{**r, "volume": "crop", "chamfer": r["chamfer"] / 2} for r in lines]
     text = "\n".join(report.compare_section(lines, "aaa", "bbb"))

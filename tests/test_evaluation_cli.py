@@ -129,6 +129,36 @@ def test_eval_parts_says_which_part_is_missing(tmp_path, cli):
     assert parts[0]["recall"] == 1.0 and parts[0]["completeness"] < 1e-6
     assert parts[1]["recall"] == 0.0 and parts[1]["completeness"] > 0.1
     assert parts[1]["samples"] >= 200  # a thin part is measured too
+    components = json.loads(stdout)["components"]
+    assert len(components) == 1 and components[0]["distance"] < 1e-6
     code, stdout, _ = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--samples",
                           "500", "--no-sdf", "--parts")
     assert code == 0 and "GT parts" in stdout
+    # a floater far from GT is named as the farthest mesh part
+    floater = trimesh.creation.icosphere(radius=0.05).apply_translation((0.0, 0.0, 0.9))
+    trimesh.util.concatenate([body, floater]).export(tmp_path / "floating.ply")
+    code, stdout, stderr = cli(str(tmp_path / "floating.ply"), str(tmp_path / "gt.ply"),
+                               "--json", "--samples", "1000", "--no-sdf", "--parts")
+    assert code == 0, stderr
+    components = json.loads(stdout)["components"]
+    assert len(components) == 2 and components[1]["distance"] > 0.3
+    assert components[0]["distance"] < 1e-6
+
+
+def test_eval_planes_says_which_face_stands_out(tmp_path, cli):
+    gt = trimesh.creation.box(extents=(1.0, 0.6, 0.4)).subdivide().subdivide()
+    pred = gt.copy()
+    pred.vertices[pred.vertices[:, 0] > 0.49, 0] += 0.02  # the +x face stands out by 0.02
+    gt.export(tmp_path / "gt.ply")
+    pred.export(tmp_path / "pred.ply")
+    code, stdout, stderr = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--json",
+                               "--samples", "1000", "--no-sdf", "--planes")
+    assert code == 0, stderr
+    result = json.loads(stdout)
+    plus_x = [f for f in result["planes"] if f["normal"][0] > 0.9]
+    assert len(result["planes"]) == 6 and len(plus_x) == 1
+    assert plus_x[0]["offset"] == pytest.approx(0.02, abs=1e-3)
+    assert 0.005 < result["plane_rms"] < 0.02
+    code, stdout, _ = cli(str(tmp_path / "pred.ply"), str(tmp_path / "gt.ply"), "--samples",
+                          "500", "--no-sdf", "--planes")
+    assert code == 0 and "GT planar faces" in stdout

@@ -11,7 +11,14 @@ light, so a run of the set can use shapes no one has tuned on.
 - ``cage``: a light grey body inside a cage of wires 1 to 3 pixels thick;
 - ``bowl``: a bowl with a textured inside (a concavity the visual hull cannot see into);
 - ``blob``: a rounded, strongly coloured object with a smooth pattern (the easy case);
-- ``rods``: a base with rods and a grille of bars 1 to 3 pixels thick.
+- ``rods``: a base with rods and a grille of bars 1 to 3 pixels thick;
+- ``device``: a composite: an upright box-like body (faces of one colour each, a printed
+  screen on its front), a grid of buttons and a flat stand under it;
+- ``birdcage``: a composite: a body of one colour on a flat base inside a cage of wires 1 to
+  3 pixels thick that stands on the same base.
+
+Single-kind objects did not predict how a fit does on composites (a body, its buttons and
+its stand are fitted together, at once), so the set has both.
 
 ``hybridneus simulate generated:<kind>:<seed> OUT`` simulates one; the benchmark suite draws
 its set with :func:`generated_set`.
@@ -25,10 +32,10 @@ from hybridneus.errors import MeshError
 from hybridneus.simulate.render import Shading
 from hybridneus.simulate.scene_mesh import SceneMesh, concatenate_parts, part_from_trimesh
 
-KINDS = ("box", "slab", "cage", "bowl", "blob", "rods")
+KINDS = ("box", "slab", "cage", "bowl", "blob", "rods", "device", "birdcage")
 #: The kinds made of parts that fire few events (flat faces of one colour, faint plates, thin
 #: wires and rods): the ones the benchmarks summarise apart.
-SCARCE_KINDS = ("box", "slab", "cage", "rods")
+SCARCE_KINDS = ("box", "slab", "cage", "rods", "device", "birdcage")
 PREFIX = "generated:"
 #: The renderer's default background (sRGB); "faint" colours are drawn near it.
 BACKGROUND = 159 / 255
@@ -222,8 +229,70 @@ def _rods_object(rng) -> list[SceneMesh]:
     return parts
 
 
+def _device_object(rng) -> list[SceneMesh]:
+    import trimesh
+
+    half = np.array([rng.uniform(0.22, 0.35), rng.uniform(0.4, 0.5), rng.uniform(0.06, 0.14)])
+    looks = [_vivid(rng) * rng.uniform(0.4, 1.0) for _ in range(6)]
+    parts = [_box((0, 0, 0), half, looks)]
+    # a printed screen on the upper front, standing out by a hair so that it is a face
+    screen = np.array([half[0] * rng.uniform(0.6, 0.85), half[1] * rng.uniform(0.2, 0.35),
+                       0.004])
+    top = half[1] - screen[1] - half[1] * rng.uniform(0.08, 0.15)
+    parts.append(_box((0, top, half[2] + screen[2]), screen,
+                      [_texture(rng)] + [looks[0]] * 5))
+    rows, cols = int(rng.integers(2, 4)), int(rng.integers(2, 4))
+    size = min(half[0] / cols, half[1] * 0.8 / rows) * rng.uniform(0.2, 0.35)
+    button = _vivid(rng) * rng.uniform(0.5, 1.0)
+    for r in range(rows):  # a grid of buttons below the screen
+        for c in range(cols):
+            x = (2 * (c + 0.5) / cols - 1) * half[0] * 0.7
+            y = -half[1] * 0.8 + (r + 0.5) / rows * (top - screen[1] + half[1] * 0.7)
+            if rng.random() < 0.5:
+                knob = trimesh.creation.cylinder(size, segment=[(x, y, half[2]),
+                                                               (x, y, half[2] + 0.02)])
+                parts.append(_solid(knob, button))
+            else:
+                parts.append(_box((x, y, half[2] + 0.01), (size, size * 0.7, 0.01),
+                                  [button] * 6))
+    stand = np.array([half[0] * rng.uniform(1.1, 1.4), rng.uniform(0.02, 0.04),
+                      half[2] * rng.uniform(2.0, 3.0)])
+    parts.append(_box((0, -half[1] - stand[1], 0), stand, [_vivid(rng) * 0.5] * 6))
+    return parts
+
+
+def _birdcage_object(rng) -> list[SceneMesh]:
+    import trimesh
+
+    radius, height = rng.uniform(0.3, 0.4), rng.uniform(0.35, 0.5)
+    base = np.array([radius * 1.15, rng.uniform(0.03, 0.05), radius * 1.15])
+    floor = -height
+    parts = [_box((0, floor - base[1], 0), base, [_vivid(rng) * rng.uniform(0.3, 0.6)] * 6)]
+    body_half = np.array([rng.uniform(0.1, 0.18), rng.uniform(0.12, 0.25),
+                          rng.uniform(0.1, 0.18)])
+    light = _near_background(rng, 0.03) + 0.15
+    parts.append(_box((0, floor + body_half[1], 0), body_half, [light] * 6))
+    extent = np.hypot(radius * 1.15 * np.sqrt(2), height)
+    px = PIXEL_PER_RADIUS * extent
+    color = _vivid(rng) * rng.uniform(0.2, 0.6)
+    n = int(rng.integers(6, 12))
+    for k in range(n):
+        a = 2 * np.pi * k / n
+        thick = rng.uniform(1.0, 3.0) * px / 2
+        x, z = radius * np.cos(a), radius * np.sin(a)
+        parts.append(_wire((x, floor, z), (x, height, z), thick, color))
+    for y in np.linspace(floor + 0.3 * height, height, int(rng.integers(2, 4))):
+        ring = trimesh.creation.torus(radius, rng.uniform(1.0, 3.0) * px / 2,
+                                      major_sections=96, minor_sections=8)
+        ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+        ring.apply_translation((0, y, 0))
+        parts.append(_solid(ring, color))
+    return parts
+
+
 _BUILDERS = {"box": _box_object, "slab": _slab_object, "cage": _cage_object,
-             "bowl": _bowl_object, "blob": _blob_object, "rods": _rods_object}
+             "bowl": _bowl_object, "blob": _blob_object, "rods": _rods_object,
+             "device": _device_object, "birdcage": _birdcage_object}
 
 
 def generated_parts(kind: str, seed: int) -> list[SceneMesh]:
