@@ -72,7 +72,7 @@ def _groups(scene: str) -> list[str]:
     if not scene.startswith("gen-"):
         return ["assets"]
     if _kind(scene) in SCARCE_KINDS:
-        return ["generated", f"generated, {'/'.join(SCARCE_KINDS)}"]
+        return ["generated", "generated, kinds with few events"]
     return ["generated"]
 
 

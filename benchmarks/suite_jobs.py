@@ -129,25 +129,27 @@ def score_field(field, gt, res: int, cameras=None, keep_cavities: bool = False,
             "fscore": cd.fscore, "faces": int(len(mesh.faces)), "mesh_s": round(mesh_s, 2)}, mesh
 
 
-def _plane_rms(mesh, gt) -> float | None:
-    """The pooled plane RMS of ``mesh`` (None without a mesh or a planar face of ``gt``)."""
+def _plane_rms(mesh, gt, cameras) -> float | None:
+    """The pooled plane RMS of ``mesh`` over the faces a camera sees (None without a mesh or
+    such a face)."""
     from hybridneus.evaluation.planes import plane_errors, plane_rms
 
     if mesh is None or not len(mesh.faces):
         return None
-    rms = plane_rms(plane_errors(mesh, gt))
+    rms = plane_rms(plane_errors(mesh, gt, cameras=cameras))
     return None if np.isnan(rms) else rms
 
 
-def _shape_metrics(mesh, gt, plane_curve: list) -> dict:
+def _shape_metrics(mesh, gt, cameras, plane_curve: list) -> dict:
     """What Chamfer mixes, apart: the flat faces' errors (``planes``, ``plane_rms`` and its
     curve), the recall of each ground-truth part (``part_recall``, largest part first) and the
     median distance of the mesh's farthest connected part (``farthest_part``), all in the
-    unit cube (hybridneus.evaluation.planes and .parts)."""
+    unit cube (hybridneus.evaluation.planes and .parts; a face no camera sees is listed with
+    ``views`` 0 and left out of ``plane_rms``)."""
     from hybridneus.evaluation.parts import component_distances, part_completeness
     from hybridneus.evaluation.planes import plane_errors, plane_rms
 
-    faces = plane_errors(mesh, gt)
+    faces = plane_errors(mesh, gt, cameras=cameras)
     out = {"part_recall": [round(p.recall, 3) for p in part_completeness(mesh, gt)],
            "farthest_part": max((c.distance for c in component_distances(mesh, gt)),
                                 default=None)}
@@ -155,7 +157,8 @@ def _shape_metrics(mesh, gt, plane_curve: list) -> dict:
         out.update({"plane_rms": plane_rms(faces), "plane_curve": plane_curve,
                     "planes": [{"normal": [round(v, 3) for v in f.normal],
                                 "area": round(f.area, 4), "rms": round(f.rms, 5),
-                                "offset": round(f.offset, 5), "coverage": round(f.coverage, 3)}
+                                "offset": round(f.offset, 5), "coverage": round(f.coverage, 3),
+                                "views": f.views}
                                for f in faces]})
     return out
 
@@ -242,12 +245,12 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
         score, m = score_field(f, gt, res, cameras)
         curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), score["chamfer"]])
         plane_curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]),
-                            _plane_rms(m, gt)])
+                            _plane_rms(m, gt, cameras)])
     field, snap = load_snapshot(cfg, snaps[-1])
     final, mesh = score_field(field, gt, res, cameras)
     curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), final["chamfer"]])
     plane_curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]),
-                        _plane_rms(mesh, gt)])
+                        _plane_rms(mesh, gt, cameras)])
     unfilled, _ = score_field(field, gt, res)
     cavities, _ = score_field(field, gt, res, cameras, keep_cavities=True)
     ungrouped, ungrouped_mesh = score_field(field, gt, res, cameras, component_gap=0.0)
@@ -265,7 +268,7 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
         if len(ungrouped_mesh.faces):  # for before/after pictures (benchmarks/pictures.py)
             save_mesh(ungrouped_mesh, run_dir / "mesh_ungrouped.ply")
         report["sdf_mae"] = float(sdf_mae(mesh, gt).mae)
-        report.update(_shape_metrics(mesh, gt, plane_curve))
+        report.update(_shape_metrics(mesh, gt, cameras, plane_curve))
         report.update(_image_metrics(field, load_dataset(dataset), image_views))
     report["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
     return report

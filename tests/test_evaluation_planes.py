@@ -66,3 +66,18 @@ def test_a_lost_face_counts_no_samples_and_a_floater_does_not_count():
     top = next(f for f in faces if f.normal[2] > 0.9)
     assert top.samples < 0.05 * max(f.samples for f in faces) and top.coverage < 0.1
     assert plane_rms(faces) < 1e-3  # the floater lies beyond max_distance
+
+
+def test_a_face_no_camera_sees_is_left_out_of_the_pooled_rms():
+    gt = _box()
+    sunk = gt.copy()
+    bottom = sunk.vertices[:, 1] < -0.29
+    sunk.vertices[bottom, 1] -= 0.02  # the -y face stands out by 0.02
+    ring = np.stack([np.cos(np.linspace(0, 6, 12)), np.full(12, 0.3),
+                     np.sin(np.linspace(0, 6, 12))], 1) * 1.5  # all above the box
+    faces = plane_errors(sunk, gt, n_samples=20_000, cameras=ring)
+    by_normal = {tuple(np.round(f.normal).astype(int)): f for f in faces}
+    assert by_normal[(0, -1, 0)].views == 0 and by_normal[(0, 1, 0)].views == 12
+    assert by_normal[(0, -1, 0)].offset == pytest.approx(0.02, abs=1e-3)
+    assert plane_rms(faces) < 1e-3  # the unseen bottom is left out
+    assert plane_rms(plane_errors(sunk, gt, n_samples=20_000)) > 0.005  # counted without

@@ -14,6 +14,11 @@ Per face: the RMS of the signed distances (the lumps and any offset of the whole
 median (the offset alone: a face sunk into a dish or standing out), and the share of the
 face's interior that the counted samples cover (a face the mesh lost scores no RMS at all, so
 read the two together). :func:`plane_rms` pools all faces' samples into one RMS.
+
+A face no camera looks at (the underside of an object standing on a table, under a path that
+stays above it) is not evidence of anything the fit did with the events: given the camera
+centres, each face says how many cameras lie in front of its plane by at least
+``MIN_ELEVATION`` degrees, and :func:`plane_rms` leaves out the faces none does.
 """
 
 from __future__ import annotations
@@ -23,7 +28,17 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import trimesh
 
-from hybridneus.evaluation.geometry import MeshLike, as_mesh, normalize_pair, sample_surface
+from hybridneus.evaluation.geometry import (
+    MeshLike,
+    as_mesh,
+    normalize_pair,
+    sample_surface,
+    unit_cube_transform,
+)
+
+#: A camera sees a face's side when it lies at least this many degrees above the face's plane,
+#: seen from the face's centre (a face seen only edge-on is not seen).
+MIN_ELEVATION = 5.0
 
 
 @dataclass
@@ -39,6 +54,8 @@ class PlaneResult:
         coverage: counted samples per unit of the face's interior area, over the mesh's
             samples per unit of its own area (about 1 where the mesh covers the face once).
         samples: how many mesh samples counted for the face.
+        views: how many of the given camera centres see the face's side (see the module
+            docstring); None when no cameras were given.
     """
 
     index: int
@@ -48,6 +65,7 @@ class PlaneResult:
     offset: float
     coverage: float
     samples: int
+    views: int | None = None
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -96,19 +114,37 @@ def plane_errors(
     max_distance: float = 0.05,
     n_samples: int = 200_000,
     seed: int = 0,
+    cameras: np.ndarray | None = None,
 ) -> list[PlaneResult]:
     """The error of ``mesh`` on each planar face of ``gt``, largest face first (see the module
     docstring; ``border`` and ``max_distance`` in the ground truth's unit cube). An empty list
-    where ``gt`` has no face of ``min_area``; a face no sample counted for has NaN RMS."""
+    where ``gt`` has no face of ``min_area``; a face no sample counted for has NaN RMS.
+    ``cameras``: camera centres (n, 3) in the frame of the meshes, to count each face's
+    ``views``."""
     import open3d as o3d
 
-    pred, truth = normalize_pair(as_mesh(mesh), as_mesh(gt))
+    gt = as_mesh(gt)
+    pred, truth = normalize_pair(as_mesh(mesh), gt)
     truth.merge_vertices()  # outlines need shared vertices
     faces = planar_faces(truth, min_area)
+    eyes = None
+    if cameras is not None:
+        centre, scale = unit_cube_transform(gt)
+        eyes = (np.asarray(cameras, np.float64).reshape(-1, 3) - centre) * scale + 0.5
+
+    def views(f: np.ndarray) -> int | None:
+        if eyes is None:
+            return None
+        middle = (truth.triangles_center[f] * truth.area_faces[f, None]).sum(0) / \
+            truth.area_faces[f].sum()
+        ray = eyes - middle
+        sine = ray @ truth.face_normals[f[0]] / np.linalg.norm(ray, axis=1)
+        return int((sine > np.sin(np.radians(MIN_ELEVATION))).sum())
+
     if not faces or not len(pred.faces):
         return [PlaneResult(i, float(truth.area_faces[f].sum()),
                             tuple(float(v) for v in truth.face_normals[f[0]]),
-                            float("nan"), float("nan"), 0.0, 0)
+                            float("nan"), float("nan"), 0.0, 0, views(f))
                 for i, f in enumerate(faces)]
     points = sample_surface(pred, n_samples, seed)
     scene = o3d.t.geometry.RaycastingScene()
@@ -139,13 +175,15 @@ def plane_errors(
         offset = float(np.median(signed)) if len(inner) else float("nan")
         coverage = len(inner) / (density * area * inner_share) if inner_share > 0 else 0.0
         results.append(PlaneResult(i, area, tuple(float(v) for v in normal), rms, offset,
-                                   float(coverage), int(len(inner))))
+                                   float(coverage), int(len(inner)), views(f)))
     return results
 
 
 def plane_rms(results: list[PlaneResult]) -> float:
-    """One RMS over all faces' counted samples (NaN when none counted)."""
-    n = sum(r.samples for r in results)
+    """One RMS over the counted samples of all faces that a camera sees (all faces, when no
+    cameras were given); NaN when none counted."""
+    kept = [r for r in results if r.samples and r.views != 0]
+    n = sum(r.samples for r in kept)
     if n == 0:
         return float("nan")
-    return float(np.sqrt(sum(r.samples * r.rms**2 for r in results if r.samples) / n))
+    return float(np.sqrt(sum(r.samples * r.rms**2 for r in kept) / n))
