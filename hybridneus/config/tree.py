@@ -184,7 +184,7 @@ class CurvaturePrior:
     one colour fires events only along its outline, and without the term it wrinkles. Costs
     one extra SDF gradient pass on two points per ray. Its weight falls to 0 by ``end``, so
     that late training gives fine detail back to the data; switch it off for objects made
-    of fine detail (fur, foliage).
+    of wires or fine detail (a cage, fur, foliage): it smooths a wire a few pixels thick away.
     """
 
     enabled: bool = True
