@@ -140,12 +140,14 @@ def _plane_rms(mesh, gt, cameras) -> float | None:
     return None if np.isnan(rms) else rms
 
 
-def _shape_metrics(mesh, gt, cameras, plane_curve: list) -> dict:
+def _shape_metrics(mesh, gt, cameras, plane_curve: list, final_at: list) -> dict:
     """What Chamfer mixes, apart: the flat faces' errors (``planes``, ``plane_rms`` and its
-    curve), the recall of each ground-truth part (``part_recall``, largest part first) and the
-    median distance of the mesh's farthest connected part (``farthest_part``), all in the
-    unit cube (hybridneus.evaluation.planes and .parts; a face no camera sees is listed with
-    ``views`` 0 and left out of ``plane_rms``)."""
+    curve, the snapshots' ``plane_curve`` with the final mesh's point at ``final_at``, its
+    elapsed seconds and step, appended), the recall of each ground-truth part
+    (``part_recall``, largest part first) and the median distance of the mesh's farthest
+    connected part (``farthest_part``), all in the unit cube (hybridneus.evaluation.planes
+    and .parts; a face no camera sees is listed with ``views`` 0 and left out of
+    ``plane_rms``)."""
     from hybridneus.evaluation.parts import component_distances, part_completeness
     from hybridneus.evaluation.planes import plane_errors, plane_rms
 
@@ -154,7 +156,9 @@ def _shape_metrics(mesh, gt, cameras, plane_curve: list) -> dict:
            "farthest_part": max((c.distance for c in component_distances(mesh, gt)),
                                 default=None)}
     if faces:
-        out.update({"plane_rms": plane_rms(faces), "plane_curve": plane_curve,
+        rms = plane_rms(faces)
+        out.update({"plane_rms": rms,
+                    "plane_curve": [*plane_curve, [*final_at, None if np.isnan(rms) else rms]],
                     "planes": [{"normal": [round(v, 3) for v in f.normal],
                                 "area": round(f.area, 4), "rms": round(f.rms, 5),
                                 "offset": round(f.offset, 5), "coverage": round(f.coverage, 3),
@@ -248,9 +252,8 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
                             _plane_rms(m, gt, cameras)])
     field, snap = load_snapshot(cfg, snaps[-1])
     final, mesh = score_field(field, gt, res, cameras)
-    curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]), final["chamfer"]])
-    plane_curve.append([round(float(snap["elapsed"]), 1), int(snap["step"]),
-                        _plane_rms(mesh, gt, cameras)])
+    final_at = [round(float(snap["elapsed"]), 1), int(snap["step"])]
+    curve.append([*final_at, final["chamfer"]])
     unfilled, _ = score_field(field, gt, res)
     cavities, _ = score_field(field, gt, res, cameras, keep_cavities=True)
     ungrouped, ungrouped_mesh = score_field(field, gt, res, cameras, component_gap=0.0)
@@ -268,7 +271,7 @@ def score_run(run_dir: Path, res: int, image_views: int, cache: Path | None = No
         if len(ungrouped_mesh.faces):  # for before/after pictures (benchmarks/pictures.py)
             save_mesh(ungrouped_mesh, run_dir / "mesh_ungrouped.ply")
         report["sdf_mae"] = float(sdf_mae(mesh, gt).mae)
-        report.update(_shape_metrics(mesh, gt, cameras, plane_curve))
+        report.update(_shape_metrics(mesh, gt, cameras, plane_curve, final_at))
         report.update(_image_metrics(field, load_dataset(dataset), image_views))
     report["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
     return report

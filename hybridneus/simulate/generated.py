@@ -162,6 +162,29 @@ def _slab_object(rng) -> list[SceneMesh]:
     return parts
 
 
+def _wire_cage(rng, radius: float, bottom: float, top: float, lowest_ring: float,
+               px: float) -> list[SceneMesh]:
+    """Upright wires on a circle of ``radius`` from ``bottom`` to ``top`` and rings from
+    ``lowest_ring`` to ``top``, each 1 to 3 pixels (``px``) thick, all of one dark colour."""
+    import trimesh
+
+    parts = []
+    color = _vivid(rng) * rng.uniform(0.2, 0.6)
+    n = int(rng.integers(6, 12))
+    for k in range(n):
+        a = 2 * np.pi * k / n
+        thick = rng.uniform(1.0, 3.0) * px / 2
+        x, z = radius * np.cos(a), radius * np.sin(a)
+        parts.append(_wire((x, bottom, z), (x, top, z), thick, color))
+    for y in np.linspace(lowest_ring, top, int(rng.integers(2, 4))):
+        ring = trimesh.creation.torus(radius, rng.uniform(1.0, 3.0) * px / 2,
+                                      major_sections=96, minor_sections=8)
+        ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+        ring.apply_translation((0, y, 0))
+        parts.append(_solid(ring, color))
+    return parts
+
+
 def _cage_object(rng) -> list[SceneMesh]:
     import trimesh
 
@@ -169,21 +192,7 @@ def _cage_object(rng) -> list[SceneMesh]:
     parts = [_solid(body, _near_background(rng, 0.03) + 0.15)]  # light grey
     radius, height = 0.4, 0.5
     extent = np.hypot(radius, height)  # the cage decides the object's bounding sphere
-    px = PIXEL_PER_RADIUS * extent
-    color = _vivid(rng) * rng.uniform(0.2, 0.6)
-    n = int(rng.integers(6, 12))
-    for k in range(n):
-        a = 2 * np.pi * k / n
-        thick = rng.uniform(1.0, 3.0) * px / 2
-        x, z = radius * np.cos(a), radius * np.sin(a)
-        parts.append(_wire((x, -height, z), (x, height, z), thick, color))
-    for y in np.linspace(-height, height, int(rng.integers(2, 4))):
-        ring = trimesh.creation.torus(radius, rng.uniform(1.0, 3.0) * px / 2,
-                                      major_sections=96, minor_sections=8)
-        ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
-        ring.apply_translation((0, y, 0))
-        parts.append(_solid(ring, color))
-    return parts
+    return parts + _wire_cage(rng, radius, -height, height, -height, PIXEL_PER_RADIUS * extent)
 
 
 def _bowl_object(rng) -> list[SceneMesh]:
@@ -262,8 +271,6 @@ def _device_object(rng) -> list[SceneMesh]:
 
 
 def _birdcage_object(rng) -> list[SceneMesh]:
-    import trimesh
-
     radius, height = rng.uniform(0.3, 0.4), rng.uniform(0.35, 0.5)
     base = np.array([radius * 1.15, rng.uniform(0.03, 0.05), radius * 1.15])
     floor = -height
@@ -273,21 +280,8 @@ def _birdcage_object(rng) -> list[SceneMesh]:
     light = _near_background(rng, 0.03) + 0.15
     parts.append(_box((0, floor + body_half[1], 0), body_half, [light] * 6))
     extent = np.hypot(radius * 1.15 * np.sqrt(2), height)
-    px = PIXEL_PER_RADIUS * extent
-    color = _vivid(rng) * rng.uniform(0.2, 0.6)
-    n = int(rng.integers(6, 12))
-    for k in range(n):
-        a = 2 * np.pi * k / n
-        thick = rng.uniform(1.0, 3.0) * px / 2
-        x, z = radius * np.cos(a), radius * np.sin(a)
-        parts.append(_wire((x, floor, z), (x, height, z), thick, color))
-    for y in np.linspace(floor + 0.3 * height, height, int(rng.integers(2, 4))):
-        ring = trimesh.creation.torus(radius, rng.uniform(1.0, 3.0) * px / 2,
-                                      major_sections=96, minor_sections=8)
-        ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
-        ring.apply_translation((0, y, 0))
-        parts.append(_solid(ring, color))
-    return parts
+    return parts + _wire_cage(rng, radius, floor, height, floor + 0.3 * height,
+                              PIXEL_PER_RADIUS * extent)
 
 
 _BUILDERS = {"box": _box_object, "slab": _slab_object, "cage": _cage_object,
