@@ -324,3 +324,57 @@ def test_resume_keeps_the_guards_learning_rate(scene, tmp_path):
     resumed, _ = prepare(None, None, resume=first.run_dir, device="cpu")
     guard = _prior(resumed, CollapseGuard)
     assert (guard.scale, guard.warm_from, guard.restores) == (0.5, 15, 1)
+
+
+def test_bending_loss_leaves_planes_and_spheres_and_penalises_lumps():
+    """The second difference of normals is 0 on a plane, small on a sphere (where the first
+    difference is not) and large across a lump."""
+    n = 256
+    gen = torch.Generator().manual_seed(0)
+    d = 0.01 * torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1)
+    flat = torch.tensor([[0.0, 0.0, 1.0]]).expand(n, 3)
+    assert float(L.bending_loss(flat, flat, flat)) == pytest.approx(0.0, abs=1e-12)
+    p = torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1) * 0.3
+
+    def sphere(q):
+        return q  # the gradient of |q| - r points along q
+
+    bend = float(L.bending_loss(sphere(p - d), sphere(p), sphere(p + d)))
+    change = float(L.curvature_loss(sphere(p), sphere(p + d)))
+    assert bend < 0.05 * change
+
+    def lump(q):  # the normal of z = 0.005 sin(2 pi x / 0.04)
+        k = 2 * np.pi / 0.04
+        return torch.stack([-0.005 * k * torch.cos(k * q[:, 0]), torch.zeros(n),
+                            torch.ones(n)], dim=-1)
+
+    assert float(L.bending_loss(lump(p - d), lump(p), lump(p + d))) > 10 * bend
+
+
+def test_curvature_silent_only_skips_rays_whose_pixel_fired(scene):
+    """With ``silent_only`` the term counts only rays with no event in their window: a batch
+    whose every pixel fired gives 0, and the silent rays alone give the term's value."""
+    from hybridneus.rendering.renderer import render_rays
+    from hybridneus.training.priors.base import StepContext
+
+    trainer, _ = prepare(scene, tiny("train.iters=1"), device="cpu")
+    batch = trainer.windows.sample(64)
+    o = torch.cat([batch.origins0, batch.origins1])
+    d = torch.cat([batch.dirs0, batch.dirs1])
+    out = render_rays(trainer.field, o, d, trainer.sampler, None, False)
+    for order in (1, 2):
+        cfg = tiny(f"priors.curvature.order={order}", "priors.curvature.silent_only=true")
+        prior = CurvaturePrior(cfg.priors.curvature)
+        batch.target = torch.ones_like(batch.target)
+        ctx = StepContext(trainer.field, out, o, d, 0.0, torch.Generator().manual_seed(1),
+                          batch)
+        assert float(prior.terms(ctx)["curvature"][1]) == 0.0
+        batch.target = torch.zeros_like(batch.target)
+        ctx = StepContext(trainer.field, out, o, d, 0.0, torch.Generator().manual_seed(1),
+                          batch)
+        everywhere = CurvaturePrior(tiny(f"priors.curvature.order={order}").priors.curvature)
+        ctx_all = StepContext(trainer.field, out, o, d, 0.0,
+                              torch.Generator().manual_seed(1), batch)
+        value = float(prior.terms(ctx)["curvature"][1])
+        assert value > 0
+        assert value == pytest.approx(float(everywhere.terms(ctx_all)["curvature"][1]))

@@ -191,6 +191,8 @@ class CurvaturePrior:
     weight: float = 0.05  # weight of the mean squared normal change
     step: float = 0.01  # distance to the shifted point (world units)
     end: float = 0.5  # fraction of training at which the weight has fallen to 0 (0: constant)
+    order: int = 1  # 1: change of the normal over step; 2: change of that change (bends free)
+    silent_only: bool = False  # only rays whose pixel fired no event in the window count
 
 
 @dataclass
