@@ -173,6 +173,7 @@ class HullPrior:
     weight: float = 1.0  # weight of relu(-sdf) at the random points the hull calls free
     resolution: int = 96  # hull grid points along the crop box's longest side
     ramp: float = 0.03  # fraction of training over which the weight grows from 0
+    silent_depth: float = 0.0  # weight of |depth beyond the hull| on rays whose pixel fired none
 
 
 @dataclass

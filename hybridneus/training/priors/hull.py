@@ -15,6 +15,7 @@ import torch
 
 from hybridneus.config import HullPrior as HullConfig
 from hybridneus.data.hull import FreeSpace
+from hybridneus.data.windows import RayBatch
 from hybridneus.training import losses as L
 from hybridneus.training.priors.base import Prior, StepContext
 from hybridneus.training.schedules import ramp
@@ -41,4 +42,30 @@ class HullPrior(Prior):
             return {}
         r = ctx.random
         free = self.free_space.free(r.points) & ~r.outside
-        return {"hull": (weight, L.outside_loss(r.sdf, free))}
+        terms = {"hull": (weight, L.outside_loss(r.sdf, free))}
+        if self.cfg.silent_depth > 0 and isinstance(ctx.batch, RayBatch):
+            terms["hull_depth"] = (weight * self.cfg.silent_depth, self._depth_excess(ctx))
+        return terms
+
+    def _depth_excess(self, ctx: StepContext, n_marks: int = 256) -> torch.Tensor:
+        """Mean distance by which the rendered surface of a silent ray lies beyond the ray's
+        entry into the hull (less one hull voxel), over the silent rays that hit."""
+        out = ctx.out
+        opacity = out.opacity
+        depth = out.depth / opacity.detach().clamp_min(1e-6)
+        silent = ctx.batch.target == 0
+        use = torch.cat([silent, silent]) & (opacity.detach() > 0.5)
+        if not bool(use.any()):
+            return depth.sum() * 0.0
+        d = depth[use]
+        frac = torch.linspace(0.0, 1.0, n_marks, device=d.device)
+        t = d.detach()[:, None] * frac  # (n, K)
+        pts = ctx.origins[use][:, None, :] + t[..., None] * ctx.dirs[use][:, None, :]
+        flat = pts.reshape(-1, 3)
+        idx = torch.round((flat - self.free_space.origin) / self.free_space.voxel)
+        in_grid = ((idx >= 0) & (idx < self.free_space.shape)).all(dim=-1)
+        inside = (in_grid & ~self.free_space.free(flat)).reshape(t.shape)
+        first = torch.where(inside.any(dim=1), inside.float().argmax(dim=1),
+                            torch.full_like(d, n_marks - 1, dtype=torch.long))
+        entry = t.gather(1, first[:, None])[:, 0]
+        return torch.relu(d - entry - self.free_space.voxel).mean()
