@@ -205,6 +205,60 @@ def test_hull_weight_grows_over_its_ramp(scene):
     assert weights == pytest.approx([0.0, 0.5, 1.0, 1.0])
 
 
+def _cube_free_space():
+    """The free space of a hull that is the cube [-0.5, 0.5]^3 (voxels of 0.05)."""
+    from hybridneus.data.hull import EventHull, FreeSpace
+
+    occupied = np.zeros((41, 41, 41), bool)
+    occupied[10:31, 10:31, 10:31] = True
+    return FreeSpace(EventHull(occupied, np.array([-1.0, -1.0, -1.0]), 0.05, 10))
+
+
+def test_hull_silent_depth_pulls_a_silent_surface_beyond_the_hull_back_to_it():
+    """Rays from z = -3 along +z enter the hull at depth 2.475 (its voxels are centred on
+    the grid points, so it begins half a voxel before the cube's face). A silent ray whose
+    rendered surface lies deeper than that (less a voxel) pays the excess, and its gradient
+    moves the surface towards the camera; a ray whose pixel fired, one that misses
+    (opacity <= 0.5) and one within a voxel of the entry pay nothing, and one deeper than the
+    prior's reach (a concavity) pays the most and is not pulled."""
+    from types import SimpleNamespace
+
+    from hybridneus.config import HullPrior as HullConfig
+    from hybridneus.data.windows import RayBatch
+    from hybridneus.training.priors import StepContext
+    from hybridneus.training.priors.hull import REACH
+
+    prior = HullPrior(HullConfig(silent_depth=1.0, ramp=0.0), _cube_free_space())
+    n = 6
+    origins = torch.tensor([[0.0, 0.0, -3.0]]).repeat(2 * n, 1)
+    dirs = torch.tensor([[0.0, 0.0, 1.0]]).repeat(2 * n, 1)
+    # silent, silent, fired, silent but a miss, silent within a voxel, silent and deep
+    depth = torch.tensor([2.62, 2.6, 2.9, 2.9, 2.5, 2.9] * 2, requires_grad=True)
+    opacity = torch.tensor([1.0, 1.0, 1.0, 0.2, 1.0, 1.0] * 2)
+    target = torch.tensor([0.0, 0.0, 0.5, 0.0, 0.0, 0.0])
+    zeros = torch.zeros(n, 3)
+    batch = RayBatch(origins[:n], dirs[:n], origins[:n], dirs[:n], target, zeros,
+                     torch.zeros(n, 2, dtype=torch.long), 0.0, 1.0)
+    out = SimpleNamespace(depth=depth * opacity, opacity=opacity)
+    ctx = StepContext(None, out, origins, dirs, 0.5, torch.Generator(), batch)
+    value = prior._depth_excess(ctx)
+    # beyond the entry (to within a march step of depth / 256) less a voxel of 0.05, at
+    # most REACH voxels; over the 4 silent rays that hit, at both ends
+    assert float(value) == pytest.approx((0.095 + 0.075 + 0 + REACH * 0.05) / 4, abs=0.005)
+    value.backward()
+    grad = depth.grad.view(2, n)
+    assert (grad[:, :2] > 0).all() and (grad[:, 2:] == 0).all()
+
+
+def test_hull_silent_depth_is_a_logged_term_only_when_weighted(scene):
+    on = prepare(scene, tiny("train.iters=1", "priors.hull.silent_depth=1",
+                             "priors.hull.ramp=0"), device="cpu")[0]
+    logs = on.train_step()
+    assert "loss/hull_depth" in logs and np.isfinite(logs["loss/hull_depth"])
+    off = prepare(scene, tiny("train.iters=1", "priors.hull.ramp=0"), device="cpu")[0]
+    assert "loss/hull_depth" not in off.train_step()
+
+
 # --------------------------------------------------------------------------- collapse guard
 
 
@@ -324,57 +378,3 @@ def test_resume_keeps_the_guards_learning_rate(scene, tmp_path):
     resumed, _ = prepare(None, None, resume=first.run_dir, device="cpu")
     guard = _prior(resumed, CollapseGuard)
     assert (guard.scale, guard.warm_from, guard.restores) == (0.5, 15, 1)
-
-
-def test_bending_loss_leaves_planes_and_spheres_and_penalises_lumps():
-    """The second difference of normals is 0 on a plane, small on a sphere (where the first
-    difference is not) and large across a lump."""
-    n = 256
-    gen = torch.Generator().manual_seed(0)
-    d = 0.01 * torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1)
-    flat = torch.tensor([[0.0, 0.0, 1.0]]).expand(n, 3)
-    assert float(L.bending_loss(flat, flat, flat)) == pytest.approx(0.0, abs=1e-12)
-    p = torch.nn.functional.normalize(torch.randn(n, 3, generator=gen), dim=-1) * 0.3
-
-    def sphere(q):
-        return q  # the gradient of |q| - r points along q
-
-    bend = float(L.bending_loss(sphere(p - d), sphere(p), sphere(p + d)))
-    change = float(L.curvature_loss(sphere(p), sphere(p + d)))
-    assert bend < 0.05 * change
-
-    def lump(q):  # the normal of z = 0.005 sin(2 pi x / 0.04)
-        k = 2 * np.pi / 0.04
-        return torch.stack([-0.005 * k * torch.cos(k * q[:, 0]), torch.zeros(n),
-                            torch.ones(n)], dim=-1)
-
-    assert float(L.bending_loss(lump(p - d), lump(p), lump(p + d))) > 10 * bend
-
-
-def test_curvature_silent_only_skips_rays_whose_pixel_fired(scene):
-    """With ``silent_only`` the term counts only rays with no event in their window: a batch
-    whose every pixel fired gives 0, and the silent rays alone give the term's value."""
-    from hybridneus.rendering.renderer import render_rays
-    from hybridneus.training.priors.base import StepContext
-
-    trainer, _ = prepare(scene, tiny("train.iters=1"), device="cpu")
-    batch = trainer.windows.sample(64)
-    o = torch.cat([batch.origins0, batch.origins1])
-    d = torch.cat([batch.dirs0, batch.dirs1])
-    out = render_rays(trainer.field, o, d, trainer.sampler, None, False)
-    for order in (1, 2):
-        cfg = tiny(f"priors.curvature.order={order}", "priors.curvature.silent_only=true")
-        prior = CurvaturePrior(cfg.priors.curvature)
-        batch.target = torch.ones_like(batch.target)
-        ctx = StepContext(trainer.field, out, o, d, 0.0, torch.Generator().manual_seed(1),
-                          batch)
-        assert float(prior.terms(ctx)["curvature"][1]) == 0.0
-        batch.target = torch.zeros_like(batch.target)
-        ctx = StepContext(trainer.field, out, o, d, 0.0, torch.Generator().manual_seed(1),
-                          batch)
-        everywhere = CurvaturePrior(tiny(f"priors.curvature.order={order}").priors.curvature)
-        ctx_all = StepContext(trainer.field, out, o, d, 0.0,
-                              torch.Generator().manual_seed(1), batch)
-        value = float(prior.terms(ctx)["curvature"][1])
-        assert value > 0
-        assert value == pytest.approx(float(everywhere.terms(ctx_all)["curvature"][1]))

@@ -139,6 +139,8 @@ REMOVED_KEYS: dict[str, tuple[Any, bool]] = {
     "train.view_balance": (0.0, False),
     "train.windows_per_step": (1, False),
     "priors.curvature.event_weight": (1.0, False),
+    "priors.curvature.order": (1, False),
+    "priors.curvature.silent_only": (False, False),
     "priors.sharpness_ceiling.follow_levels": (False, False),
     "refine.poses": (False, False),
     "refine.pose_knots": (0, False),

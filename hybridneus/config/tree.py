@@ -166,14 +166,15 @@ class HullPrior:
     there positive. It keeps matter out of space no event defends (under a flat object seen
     from above). Costs one hull build at the start (about a second on two cores) and a
     lookup per random point. Switch it off when the background fires events too (a
-    cluttered room, a moving background).
+    cluttered room, a moving background). ``silent_depth`` also holds the surfaces that
+    silent pixels see at the hull, within a few hull voxels (docs/training.md, "Priors").
     """
 
     enabled: bool = True
     weight: float = 1.0  # weight of relu(-sdf) at the random points the hull calls free
     resolution: int = 96  # hull grid points along the crop box's longest side
     ramp: float = 0.03  # fraction of training over which the weight grows from 0
-    silent_depth: float = 0.0  # weight of |depth beyond the hull| on rays whose pixel fired none
+    silent_depth: float = 0.0  # weight of a silent ray's surface depth beyond the hull (0: off)
 
 
 @dataclass
@@ -192,8 +193,6 @@ class CurvaturePrior:
     weight: float = 0.05  # weight of the mean squared normal change
     step: float = 0.01  # distance to the shifted point (world units)
     end: float = 0.5  # fraction of training at which the weight has fallen to 0 (0: constant)
-    order: int = 1  # 1: change of the normal over step; 2: change of that change (bends free)
-    silent_only: bool = False  # only rays whose pixel fired no event in the window count
 
 
 @dataclass

@@ -126,28 +126,6 @@ def curvature_loss(
     return _mean(((na - nb) ** 2).sum(dim=-1), weights)
 
 
-def bending_loss(
-    grad_a: torch.Tensor, grad_b: torch.Tensor, grad_c: torch.Tensor,
-    weights: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """Mean squared second difference of unit normals at ``p - d``, ``p`` and ``p + d``.
-
-    Zero on planes and, to second order in ``|d|``, on spheres and cylinders: it penalises
-    lumps, not bends.
-
-    Args:
-        grad_a: SDF gradients at the points shifted by ``-d``, (n_points, 3).
-        grad_b: SDF gradients at the points, (n_points, 3).
-        grad_c: SDF gradients at the points shifted by ``+d``, (n_points, 3).
-        weights: optional (n_points,) weights of a weighted mean.
-
-    Returns:
-        loss: scalar.
-    """
-    na, nb, nc = (torch.nn.functional.normalize(g, dim=-1) for g in (grad_a, grad_b, grad_c))
-    return _mean(((na + nc - 2.0 * nb) ** 2).sum(dim=-1), weights)
-
-
 def outside_loss(sdf: torch.Tensor, outside: torch.Tensor) -> torch.Tensor:
     """Mean of ``relu(-sdf)`` over the points known to be empty (0 when there are none).
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 import torch
 
 from hybridneus.config import CurvaturePrior as CurvatureConfig
-from hybridneus.data.windows import RayBatch
 from hybridneus.training import losses as L
 from hybridneus.training.priors.base import Prior, StepContext
 from hybridneus.training.schedules import fading
@@ -50,19 +49,9 @@ class CurvaturePrior(Prior):
         if weight <= 0:
             return {}
         points, hit = surface_points(ctx.out, ctx.origins, ctx.dirs)
-        counts = hit
-        if self.cfg.silent_only and isinstance(ctx.batch, RayBatch):
-            silent = (ctx.batch.target == 0).to(hit.dtype)
-            counts = hit * torch.cat([silent, silent])
         offset = torch.randn(points.shape, generator=ctx.generator, device=points.device)
-        step = self.cfg.step * torch.nn.functional.normalize(offset, dim=-1)
-        if self.cfg.order == 2:
-            grads = ctx.field.sdf_gradient_features(
-                torch.cat([points - step, points, points + step]), True)[1]
-            ctx.eikonal.append((grads, torch.cat([hit, hit, hit])))
-            value = L.bending_loss(*grads.chunk(3), counts)
-        else:
-            grads = ctx.field.sdf_gradient_features(torch.cat([points, points + step]), True)[1]
-            ctx.eikonal.append((grads, torch.cat([hit, hit])))
-            value = L.curvature_loss(*grads.chunk(2), counts)
-        return {"curvature": (weight, value)}
+        shifted = points + self.cfg.step * torch.nn.functional.normalize(offset, dim=-1)
+        _, grad, _ = ctx.field.sdf_gradient_features(torch.cat([points, shifted]), True)
+        ctx.eikonal.append((grad, torch.cat([hit, hit])))
+        grad_p, grad_s = grad.chunk(2)
+        return {"curvature": (weight, L.curvature_loss(grad_p, grad_s, hit))}
