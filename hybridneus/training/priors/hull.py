@@ -20,10 +20,6 @@ from hybridneus.training import losses as L
 from hybridneus.training.priors.base import Prior, StepContext
 from hybridneus.training.schedules import ramp
 
-#: Voxels of the hull beyond the first by which a silent ray's surface may lie behind the hull
-#: and still be pulled to it.
-REACH = 3
-
 
 class HullPrior(Prior):
     """See the module docstring.
@@ -53,9 +49,7 @@ class HullPrior(Prior):
 
     def _depth_excess(self, ctx: StepContext, n_marks: int = 256) -> torch.Tensor:
         """Mean distance by which the rendered surface of a silent ray lies beyond the ray's
-        entry into the hull (less one hull voxel), over the silent rays that hit; an excess
-        is counted up to :data:`REACH` voxels, and a surface deeper than that pays no more and
-        is not pulled: it is a concavity the hull cannot see into (a bowl), not a sunk face."""
+        entry into the hull (less one hull voxel), over the silent rays that hit."""
         out = ctx.out
         opacity = out.opacity
         depth = out.depth / opacity.detach().clamp_min(1e-6)
@@ -74,5 +68,4 @@ class HullPrior(Prior):
         first = torch.where(inside.any(dim=1), inside.float().argmax(dim=1),
                             torch.full_like(d, n_marks - 1, dtype=torch.long))
         entry = t.gather(1, first[:, None])[:, 0]
-        voxel = self.free_space.voxel
-        return (d - entry - voxel).clamp(0.0, REACH * voxel).mean()
+        return torch.relu(d - entry - self.free_space.voxel).mean()
