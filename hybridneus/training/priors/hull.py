@@ -61,10 +61,7 @@ class HullPrior(Prior):
         frac = torch.linspace(0.0, 1.0, n_marks, device=d.device)
         t = d.detach()[:, None] * frac  # (n, K)
         pts = ctx.origins[use][:, None, :] + t[..., None] * ctx.dirs[use][:, None, :]
-        flat = pts.reshape(-1, 3)
-        idx = torch.round((flat - self.free_space.origin) / self.free_space.voxel)
-        in_grid = ((idx >= 0) & (idx < self.free_space.shape)).all(dim=-1)
-        inside = (in_grid & ~self.free_space.free(flat)).reshape(t.shape)
+        inside = self.free_space.occupied(pts.reshape(-1, 3)).reshape(t.shape)
         first = torch.where(inside.any(dim=1), inside.float().argmax(dim=1),
                             torch.full_like(d, n_marks - 1, dtype=torch.long))
         entry = t.gather(1, first[:, None])[:, 0]
