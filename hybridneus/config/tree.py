@@ -167,7 +167,7 @@ class HullPrior:
     from above). Costs one hull build at the start (about a second on two cores) and a
     lookup per random point. Switch it off when the background fires events too (a
     cluttered room, a moving background). ``silent_depth`` also holds the surfaces that
-    silent pixels see at the hull; it fills hollows (docs/training.md, "Priors").
+    silent pixels see at the hull; at weight 1 it fills hollows (docs/training.md, "Priors").
     """
 
     enabled: bool = True
