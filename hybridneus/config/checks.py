@@ -75,7 +75,6 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("priors.hull.silent_depth", lambda v: v >= 0, ">= 0 (0: off)"),
     ("priors.curvature.step", lambda v: v > 0, "> 0"),
     ("priors.curvature.end", _fraction, "a fraction of training in [0, 1]"),
-    ("priors.curvature.robust", lambda v: v >= 0, ">= 0 (0: plain square)"),
     ("priors.sharpness_ceiling.per_cell", lambda v: v > 0, "> 0"),
     ("priors.sharpness_floor.at", lambda v: 0 < v <= 1, "a fraction of training in (0, 1]"),
     ("priors.sharpness_floor.delay", _fraction, "a fraction of training in [0, 1]"),

@@ -141,6 +141,7 @@ REMOVED_KEYS: dict[str, tuple[Any, bool]] = {
     "priors.curvature.event_weight": (1.0, False),
     "priors.curvature.order": (1, False),
     "priors.curvature.silent_only": (False, False),
+    "priors.curvature.robust": (0.0, False),
     "priors.sharpness_ceiling.follow_levels": (False, False),
     "refine.poses": (False, False),
     "refine.pose_knots": (0, False),

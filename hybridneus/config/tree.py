@@ -193,7 +193,6 @@ class CurvaturePrior:
     weight: float = 0.05  # weight of the mean squared normal change
     step: float = 0.01  # distance to the shifted point (world units)
     end: float = 0.5  # fraction of training at which the weight has fallen to 0 (0: constant)
-    robust: float = 0.0  # normal change at which the penalty saturates (0: plain square)
 
 
 @dataclass

@@ -106,8 +106,7 @@ def _mean(values: torch.Tensor, weights: torch.Tensor | None) -> torch.Tensor:
 
 
 def curvature_loss(
-    grad_a: torch.Tensor, grad_b: torch.Tensor, weights: torch.Tensor | None = None,
-    scale: float = 0.0,
+    grad_a: torch.Tensor, grad_b: torch.Tensor, weights: torch.Tensor | None = None
 ) -> torch.Tensor:
     """Mean squared change of unit normals between points and their offset copies.
 
@@ -115,10 +114,6 @@ def curvature_loss(
         grad_a: SDF gradients at points, (n_points, 3).
         grad_b: SDF gradients at the points shifted by a small random offset, (n_points, 3).
         weights: optional (n_points,) weights of a weighted mean.
-        scale: 0 for the plain square; otherwise the change ``c`` at which the penalty
-            saturates, ``scale**2 * d**2 / (d**2 + scale**2)`` (Geman-McClure): changes well
-            below ``scale`` cost their square, a crease or a wire far above it almost nothing
-            more.
 
     Returns:
         loss: scalar.
@@ -128,10 +123,7 @@ def curvature_loss(
     """
     na = torch.nn.functional.normalize(grad_a, dim=-1)
     nb = torch.nn.functional.normalize(grad_b, dim=-1)
-    d2 = ((na - nb) ** 2).sum(dim=-1)
-    if scale > 0:
-        d2 = scale**2 * d2 / (d2 + scale**2)
-    return _mean(d2, weights)
+    return _mean(((na - nb) ** 2).sum(dim=-1), weights)
 
 
 def outside_loss(sdf: torch.Tensor, outside: torch.Tensor) -> torch.Tensor:

@@ -54,4 +54,4 @@ class CurvaturePrior(Prior):
         _, grad, _ = ctx.field.sdf_gradient_features(torch.cat([points, shifted]), True)
         ctx.eikonal.append((grad, torch.cat([hit, hit])))
         grad_p, grad_s = grad.chunk(2)
-        return {"curvature": (weight, L.curvature_loss(grad_p, grad_s, hit, self.cfg.robust))}
+        return {"curvature": (weight, L.curvature_loss(grad_p, grad_s, hit))}
