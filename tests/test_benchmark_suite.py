@@ -676,3 +676,35 @@ def test_a_busy_test_run_is_counted_from_pytests_summary():
             "date": "2026-12-06T00:00:00+00:00", "command": "python bench_busy_tests.py"}
     assert "| 2 | 610 | 0 | 0 | 1301 | abc1234 | X, all threads | 2026-12-06 |" in \
         report.busy_tests_section([line])
+
+
+def test_part_events_scores_each_generated_part_and_refuses_other_meshes(tmp_path, tiny_scene):
+    suite = _suite_module()
+    import part_events
+
+    from hybridneus.data import load_dataset
+    from hybridneus.simulate.generated import generated_parts
+
+    args = argparse.Namespace(views=12, width=48, height=36, test_views=0, noise=(0.0, 0.0),
+                              cache=tmp_path, spiral="seiffert")
+    folder = suite.dataset_for("generated:box:5", {}, args)
+    source, samples, extents = part_events.part_samples(folder, 200)
+    assert source == "generated:box:5" and len(samples) == len(generated_parts("box", 5))
+    split = load_dataset(folder)["train"]
+    views = np.arange(split.n_views - 1)
+    far = samples[0] + 50.0  # far behind every camera: no view sees it
+    shares = part_events.seen_shares(split, [samples[0], far], views)
+    assert shares[0] > 0.2 and shares[1] == 0.0
+
+    out = tmp_path / "part_events.jsonl"
+    script = SUITE.parent / "part_events.py"
+    proc = subprocess.run([sys.executable, str(script), str(folder), "--every", "2",
+                           "--out", str(out), "--allow-dirty"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    line = json.loads(out.read_text().splitlines()[-1])
+    assert len(line["seen_level"]) == len(line["seen_high"]) == len(extents)
+    assert line["views_high"] + line["views_level"] == len(range(0, split.n_views - 1, 2))
+    proc = subprocess.run([sys.executable, str(script), str(tiny_scene / "device"), "--out",
+                           str(out), "--allow-dirty"], capture_output=True, text=True)
+    assert proc.returncode != 0 and "is not a generated object" in proc.stderr
+    assert "Traceback" not in proc.stderr
