@@ -41,8 +41,8 @@ def part_samples(root: Path, n: int) -> tuple[str, list[np.ndarray], list[list[f
     transform = scene["transform"]
     samples, extents = [], []
     for i, part in enumerate(generated.generated_parts(kind, seed)):
-        vertices = part.vertices * transform["scale"] + np.asarray(transform["translation"])
-        mesh = trimesh.Trimesh(vertices, part.faces, process=False)
+        # the simulator's own move of the source mesh into the dataset's frame
+        mesh = part.transformed(transform["scale"], transform["translation"]).to_trimesh()
         samples.append(trimesh.sample.sample_surface(mesh, n, seed=i)[0])
         extents.append([round(float(e), 4) for e in mesh.extents])
     return source, samples, extents
