@@ -20,6 +20,12 @@ from hybridneus.training import losses as L
 from hybridneus.training.priors.base import Prior, StepContext
 from hybridneus.training.schedules import ramp
 
+#: The deepest drift behind the hull, in hull voxels, that ``silent_depth`` pulls back. A
+#: silent ray that meets the surface farther in looks through a hollow that no silhouette
+#: carves (the body inside a wire cage, the floor under a bowl's rim), where the surface
+#: rightly lies behind the hull; a face that sank lies a few voxels in.
+HOLLOW_VOXELS = 8
+
 
 class HullPrior(Prior):
     """See the module docstring.
@@ -49,7 +55,8 @@ class HullPrior(Prior):
 
     def _depth_excess(self, ctx: StepContext, n_marks: int = 256) -> torch.Tensor:
         """Mean distance by which the rendered surface of a silent ray lies beyond the ray's
-        entry into the hull (less one hull voxel), over the silent rays that hit."""
+        entry into the hull (less one hull voxel), over the silent rays that hit; an excess
+        is counted up to :data:`HOLLOW_VOXELS` hull voxels and pulls no further."""
         out = ctx.out
         opacity = out.opacity
         depth = out.depth / opacity.detach().clamp_min(1e-6)
@@ -65,4 +72,6 @@ class HullPrior(Prior):
         first = torch.where(inside.any(dim=1), inside.float().argmax(dim=1),
                             torch.full_like(d, n_marks - 1, dtype=torch.long))
         entry = t.gather(1, first[:, None])[:, 0]
-        return torch.relu(d - entry - self.free_space.voxel).mean()
+        voxel = self.free_space.voxel
+        # beyond the cap the excess is a hollow the hull cannot carve, not a drifted face
+        return torch.relu(d - entry - voxel).clamp(max=HOLLOW_VOXELS * voxel).mean()
