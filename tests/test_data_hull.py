@@ -241,17 +241,6 @@ def test_free_space_grows_the_hull_by_whole_voxels():
     assert free.free(pts).tolist() == [False, True, False]
 
 
-def test_occupied_is_inside_the_grid_and_not_free():
-    """Off the grid a point is neither free nor occupied (a ray's march from the camera
-    starts there)."""
-    occupied = np.zeros((7, 7, 7), bool)
-    occupied[3, 3, 3] = True
-    space = FreeSpace(EventHull(occupied, np.array([-3.0, -3.0, -3.0]), 1.0, 1))
-    pts = torch.tensor([[0.2, 0.0, 0.0], [2.0, 0.0, 0.0], [9.0, 0.0, 0.0]])
-    assert space.occupied(pts).tolist() == [True, False, False]
-    assert space.free(pts).tolist() == [False, True, False]
-
-
 def _without_crop(scene, tmp_path):
     """A copy of ``scene`` whose scene.json names no crop: the nerf group's whole volume."""
     import json

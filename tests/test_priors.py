@@ -205,64 +205,6 @@ def test_hull_weight_grows_over_its_ramp(scene):
     assert weights == pytest.approx([0.0, 0.5, 1.0, 1.0])
 
 
-def _cube_free_space():
-    """The free space of a hull that is the cube [-0.5, 0.5]^3 (voxels of 0.05)."""
-    from hybridneus.data.hull import EventHull, FreeSpace
-
-    occupied = np.zeros((41, 41, 41), bool)
-    occupied[10:31, 10:31, 10:31] = True
-    return FreeSpace(EventHull(occupied, np.array([-1.0, -1.0, -1.0]), 0.05, 10))
-
-
-def test_hull_silent_depth_pulls_a_silent_surface_beyond_the_hull_back_to_it():
-    """Rays from z = -3 along +z enter the hull at depth 2.475 (its voxels are centred on
-    the grid points, so it begins half a voxel before the cube's face). A silent ray whose
-    rendered surface lies deeper than that (less a voxel) pays the excess, and its gradient
-    moves the surface towards the camera; a ray whose pixel fired, one that misses
-    (opacity <= 0.5) and one within a voxel of the entry pay nothing. A surface deeper than
-    HOLLOW_VOXELS voxels pays the cap and is not pulled: it is a hollow, not a drift."""
-    from types import SimpleNamespace
-
-    from hybridneus.config import HullPrior as HullConfig
-    from hybridneus.data.windows import RayBatch
-    from hybridneus.training.priors import StepContext
-    from hybridneus.training.priors.hull import HOLLOW_VOXELS
-
-    prior = HullPrior(HullConfig(silent_depth=1.0, ramp=0.0), _cube_free_space())
-    n = 7
-    origins = torch.tensor([[0.0, 0.0, -3.0]]).repeat(2 * n, 1)
-    dirs = torch.tensor([[0.0, 0.0, 1.0]]).repeat(2 * n, 1)
-    # silent, silent, fired, silent but a miss, silent within a voxel, silent and deeper,
-    # silent and far deeper than the cap (the hull's back face lies at 3.525)
-    depth = torch.tensor([2.62, 2.6, 2.9, 2.9, 2.5, 2.8, 3.4] * 2, requires_grad=True)
-    opacity = torch.tensor([1.0, 1.0, 1.0, 0.2, 1.0, 1.0, 1.0] * 2)
-    target = torch.tensor([0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0])
-    zeros = torch.zeros(n, 3)
-    batch = RayBatch(origins[:n], dirs[:n], origins[:n], dirs[:n], target, zeros,
-                     torch.zeros(n, 2, dtype=torch.long), 0.0, 1.0)
-    out = SimpleNamespace(depth=depth * opacity, opacity=opacity)
-    ctx = StepContext(None, out, origins, dirs, 0.5, torch.Generator(), batch)
-    value = prior._depth_excess(ctx)
-    # beyond the entry (to within a march step of depth / 256) less a voxel of 0.05, over
-    # the 5 silent rays that hit, at both ends; the last one counts the cap
-    cap = HOLLOW_VOXELS * 0.05
-    assert 0.275 < cap < 0.85
-    assert float(value) == pytest.approx((0.095 + 0.075 + 0 + 0.275 + cap) / 5, abs=0.005)
-    value.backward()
-    grad = depth.grad.view(2, n)
-    assert (grad[:, :2] > 0).all() and (grad[:, 5] > 0).all()
-    assert (grad[:, 2:5] == 0).all() and (grad[:, 6] == 0).all()
-
-
-def test_hull_silent_depth_is_a_logged_term_only_when_weighted(scene):
-    on = prepare(scene, tiny("train.iters=1", "priors.hull.silent_depth=1",
-                             "priors.hull.ramp=0"), device="cpu")[0]
-    logs = on.train_step()
-    assert "loss/hull_depth" in logs and np.isfinite(logs["loss/hull_depth"])
-    off = prepare(scene, tiny("train.iters=1", "priors.hull.ramp=0"), device="cpu")[0]
-    assert "loss/hull_depth" not in off.train_step()
-
-
 # --------------------------------------------------------------------------- collapse guard
 
 

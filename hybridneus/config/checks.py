@@ -72,7 +72,6 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("estimate.eps_ease", _fraction, "a fraction of training in [0, 1]"),
     ("priors.hull.resolution", lambda v: v >= 8, ">= 8"),
     ("priors.hull.ramp", _fraction, "a fraction of training in [0, 1]"),
-    ("priors.hull.silent_depth", lambda v: v >= 0, ">= 0 (0: off)"),
     ("priors.curvature.step", lambda v: v > 0, "> 0"),
     ("priors.curvature.end", _fraction, "a fraction of training in [0, 1]"),
     ("priors.sharpness_ceiling.per_cell", lambda v: v > 0, "> 0"),

@@ -142,6 +142,7 @@ REMOVED_KEYS: dict[str, tuple[Any, bool]] = {
     "priors.curvature.order": (1, False),
     "priors.curvature.silent_only": (False, False),
     "priors.curvature.robust": (0.0, False),
+    "priors.hull.silent_depth": (0.0, False),
     "priors.sharpness_ceiling.follow_levels": (False, False),
     "refine.poses": (False, False),
     "refine.pose_knots": (0, False),

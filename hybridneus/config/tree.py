@@ -166,15 +166,13 @@ class HullPrior:
     there positive. It keeps matter out of space no event defends (under a flat object seen
     from above). Costs one hull build at the start (about a second on two cores) and a
     lookup per random point. Switch it off when the background fires events too (a
-    cluttered room, a moving background). ``silent_depth`` also holds the surfaces that
-    silent pixels see at the hull; at weight 1 it fills hollows (docs/training.md, "Priors").
+    cluttered room, a moving background).
     """
 
     enabled: bool = True
     weight: float = 1.0  # weight of relu(-sdf) at the random points the hull calls free
     resolution: int = 96  # hull grid points along the crop box's longest side
     ramp: float = 0.03  # fraction of training over which the weight grows from 0
-    silent_depth: float = 0.0  # weight of a silent ray's surface depth beyond the hull (0: off)
 
 
 @dataclass

@@ -362,23 +362,12 @@ class FreeSpace:
         """The share of the grid that is free."""
         return float(self.free_grid.float().mean())
 
-    def _lookup(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(n,) bool: ``points`` (n, 3) within the grid; (n,) bool: their voxel is free."""
+    def free(self, points: torch.Tensor) -> torch.Tensor:
+        """(n,) bool for world ``points`` (n, 3): True where the hull says empty."""
         idx = torch.round((points.detach() - self.origin) / self.voxel).long()
         inside = ((idx >= 0) & (idx < self.shape)).all(dim=-1)
         idx = torch.minimum(idx.clamp(min=0), self.shape - 1)
-        return inside, self.free_grid[idx[:, 0], idx[:, 1], idx[:, 2]]
-
-    def free(self, points: torch.Tensor) -> torch.Tensor:
-        """(n,) bool for world ``points`` (n, 3): True where the hull says empty."""
-        inside, free = self._lookup(points)
-        return inside & free
-
-    def occupied(self, points: torch.Tensor) -> torch.Tensor:
-        """(n,) bool for world ``points`` (n, 3): True inside the hull (off its grid is
-        neither free nor occupied)."""
-        inside, free = self._lookup(points)
-        return inside & ~free
+        return inside & self.free_grid[idx[:, 0], idx[:, 1], idx[:, 2]]
 
 
 def event_free_space(
