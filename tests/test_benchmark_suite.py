@@ -661,6 +661,23 @@ def test_a_budget_on_a_busy_machine_is_recorded_with_its_replans(tiny_scene, tmp
     assert proc.returncode != 0 and "no scene.json" in proc.stderr
 
 
+def test_a_budget_that_loading_uses_up_is_recorded_as_refused(tiny_scene, tmp_path):
+    """bench_budget.py: a budget too short for a single step (as on a machine so busy that
+    loading takes it all) is refused by the fit; the bench writes that as its line."""
+    out = tmp_path / "budget.jsonl"
+    proc = subprocess.run([sys.executable, str(SUITE.with_name("bench_budget.py")),
+                           str(tiny_scene / "device"), "--minutes", "0.001", "--busy", "0",
+                           "--threads", "1", "--allow-dirty", "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (line,) = (json.loads(x) for x in out.read_text().splitlines())
+    assert line["steps"] == line["planned"] == 0 and "train.minutes" in line["refused"]
+    sys.path.insert(0, str(SUITE.parent))
+    import report
+
+    assert any("| refused: loading left no time |" in row for row in report.budget_section([line]))
+
+
 def test_a_busy_test_run_is_counted_from_pytests_summary():
     """bench_busy_tests.py reads pytest's closing line; the report shows the newest run."""
     sys.path.insert(0, str(SUITE.parent))
