@@ -58,23 +58,21 @@ def run_fit(dataset: Path, out: Path, minutes: float, threads: int, seed: int) -
     start = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - start
+    timing = {"wall_s": round(wall, 1), "used": round(wall / (60.0 * minutes), 4)}
     if proc.returncode != 0:
         last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
-        if "train.minutes:" in last:
-            # a machine so busy that loading ate the budget: the fit refuses to train, and
-            # the line says so instead of the bench failing
+        # the fit's refusal of a budget that loading used up (hybridneus.api), not a bad
+        # train.minutes: on a machine that busy the line says so instead of the bench failing
+        if "train.minutes:" in last and " leave time for " in last:
             return {"steps": 0, "planned": 0, "stopped_early": False, "replans": 0,
-                    "paces": None, "refused": last, "wall_s": round(wall, 1),
-                    "used": round(wall / (60.0 * minutes), 4)}
+                    "paces": None, "refused": last, **timing}
         raise SystemExit(f"error: {dataset}: the fit failed ({last})")
     run = out / (out / "latest").read_text().strip()
     record = yaml.safe_load((run / "scene.yaml").read_text())
     ran = record["stopped_at"] if record.get("stopped_at") is not None else record["steps"]
     return {"steps": int(ran), "planned": int(record["steps"]),
             "stopped_early": record.get("stopped_at") is not None,
-            "replans": int(record.get("replans", 0)), "paces": record.get("paces"),
-            "wall_s": round(wall, 1), "used": round(wall / (60.0 * minutes), 4)}
-
+            "replans": int(record.get("replans", 0)), "paces": record.get("paces"), **timing}
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],

@@ -590,9 +590,10 @@ def budget_section(rows: list[dict]) -> list[str]:
            "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         busy = f"{r['busy_minutes']:g} min, {r['hogs']} processes" if r["busy_minutes"] else "-"
-        ran = f"{r['steps']} of {r['planned']}" if r["stopped_early"] else str(r["steps"])
         if r.get("refused"):
             ran = "refused: loading left no time"
+        else:
+            ran = f"{r['steps']} of {r['planned']}" if r["stopped_early"] else str(r["steps"])
         paces = "-" if not r.get("paces") else "x to ".join(f"{p:.2f}" for p in r["paces"]) + "x"
         out.append(f"| {r['dataset']} | {r['minutes']:g} min | {busy} | {ran} | {r['replans']} "
                    f"| {paces} | {r['wall_s']:.0f} | {100 * r['used']:.1f}% | {r['commit']} | "
