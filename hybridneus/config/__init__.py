@@ -37,6 +37,7 @@ from hybridneus.config.tree import (
     RenderConfig,
     SharpnessCeiling,
     SharpnessFloor,
+    SilentLinesPrior,
     TrainConfig,
     preset_config,
 )
@@ -45,7 +46,7 @@ __all__ = [
     "LEGACY_KEYS", "N_RAYS_BY_DEVICE", "PRESETS", "CollapseGuard", "Config", "CurvaturePrior",
     "DataConfig", "EstimateConfig", "FieldConfig", "GridConfig", "HullPrior", "LossConfig",
     "PriorsConfig", "RefineConfig", "RenderConfig", "SharpnessCeiling", "SharpnessFloor",
-    "TrainConfig", "apply_overrides",
+    "SilentLinesPrior", "TrainConfig", "apply_overrides",
     "config_from_dict", "config_markdown", "config_table", "load_config", "preset_config",
     "rays_per_step", "save_config", "set_value", "validate",
 ]

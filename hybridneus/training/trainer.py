@@ -109,8 +109,11 @@ class Trainer:
             occupancy=self.occupancy if r.occupancy else None, n_march=r.occupancy_march,
             near_min=r.near_min, chunk=r.chunk,
         )
-        self.windows = EventWindowSampler(self.split, self.preset, seed=cfg.train.seed,
-                                          window=cfg.train.window, device=self.device)
+        lines = cfg.priors.silent_lines
+        self.windows = EventWindowSampler(
+            self.split, self.preset, seed=cfg.train.seed, window=cfg.train.window,
+            device=self.device, lines=lines.lines if lines.enabled else 0,
+            line_length=(lines.min_length, lines.max_length), line_views=lines.views)
         self.frames = None
         if cfg.train.supervision == "rgb":
             from hybridneus.data.frames import FrameRaySampler

@@ -1,0 +1,71 @@
+"""``priors.silent_lines``: a silent line of pixels sees one flat surface
+(:class:`hybridneus.config.SilentLinesPrior`).
+
+A face of one colour fires only along its outline, and the events hold its inside nowhere:
+behind a firing outline, a dish explains them as well as the plane does. On a plane, inverse
+depth is linear along any image line, so for a run of silent pixels along the window's image
+motion (:mod:`hybridneus.data.lines`) the depth of a pixel between the run's ends follows
+from theirs. The term is the mean distance, along the camera's viewing axis, between each
+middle's rendered depth and that plane's, over the lines whose three rays hit the surface;
+its weight grows from 0 over ``ramp``. The sampler renders the lines' rays with the batch
+(:func:`hybridneus.training.objective.batch_rays`).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from hybridneus.config import SilentLinesPrior as SilentLinesConfig
+from hybridneus.training.priors.base import Prior, StepContext
+from hybridneus.training.schedules import ramp
+
+
+def plane_depth(z_start: torch.Tensor, z_end: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    """Depth at ``t`` in [0, 1] along an image line between depths ``z_start`` and ``z_end``
+    on one plane (inverse depth is linear along the line); all (k,)."""
+    return 1.0 / ((1.0 - t) / z_start + t / z_end)
+
+
+def line_residual(depth: torch.Tensor, opacity: torch.Tensor, dirs: torch.Tensor,
+                  forward: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    """Mean |depth of each middle - plane_depth of its ends| along ``forward``.
+
+    Args:
+        depth: (3k,) expected distance along the ray (weighted, as the renderer's) of the
+            starts, middles and ends in that order.
+        opacity: (3k,) their opacities; a line counts where all three exceed 0.5.
+        dirs: (3k, 3) unit ray directions.
+        forward: (3,) the camera's viewing axis.
+        t: (k,) where each middle lies between its ends.
+
+    Returns:
+        () the mean over the counted lines (0 when none count).
+    """
+    k = t.shape[0]
+    z = depth / opacity.detach().clamp_min(1e-6) * (dirs @ forward)
+    z_a, z_m, z_b = z[:k], z[k:2 * k], z[2 * k:]
+    hit = (opacity.detach() > 0.5).reshape(3, k).all(dim=0)
+    if not bool(hit.any()):
+        return z.sum() * 0.0
+    gap = (z_m - plane_depth(z_a.clamp_min(1e-3), z_b.clamp_min(1e-3), t)).abs()
+    return gap[hit].mean()
+
+
+class SilentLinesPrior(Prior):
+    """See the module docstring."""
+
+    name = "silent_lines"
+
+    def __init__(self, cfg: SilentLinesConfig) -> None:
+        self.cfg = cfg
+
+    def terms(self, ctx: StepContext) -> dict[str, tuple[float, torch.Tensor]]:
+        batch = ctx.batch
+        weight = self.cfg.weight * ramp(ctx.p, 0.0, self.cfg.ramp)
+        if weight <= 0 or getattr(batch, "line_t", None) is None or len(batch.line_t) == 0:
+            return {}
+        k3 = 3 * batch.line_t.shape[0]
+        out = ctx.out
+        value = line_residual(out.depth[-k3:], out.opacity[-k3:], ctx.dirs[-k3:],
+                              batch.forward, batch.line_t)
+        return {"silent_lines": (weight, value)}
