@@ -324,3 +324,55 @@ def test_resume_keeps_the_guards_learning_rate(scene, tmp_path):
     resumed, _ = prepare(None, None, resume=first.run_dir, device="cpu")
     guard = _prior(resumed, CollapseGuard)
     assert (guard.scale, guard.warm_from, guard.restores) == (0.5, 15, 1)
+
+
+# --------------------------------------------------------------------------- silent lines
+
+
+def test_silent_lines_are_rendered_with_the_batch_and_leave_the_event_term_alone(scene):
+    """The sampler adds three rays a line after the batch's pixels; the event term reads
+    the pixels only, and the prior's term is logged. Off, a batch carries no lines."""
+    from hybridneus.training.objective import batch_rays
+
+    on = tiny("train.iters=1", "priors.silent_lines.enabled=true",
+              "priors.silent_lines.min_length=2")
+    trainer, _ = prepare(scene, on, device="cpu")
+    found = 0
+    for _ in range(20):
+        batch = trainer.windows.sample(32)
+        k = len(batch.line_t)
+        origins, _ = batch_rays(batch)
+        assert origins.shape == (64 + 3 * k, 3) and batch.line_dirs.shape == (3 * k, 3)
+        found += k
+    assert found > 0
+    logs = trainer.train_step()
+    assert "loss/event" in logs
+    assert any(p.name == "silent_lines" for p in trainer.priors)
+    off, _ = prepare(scene, tiny("train.iters=1"), device="cpu")
+    batch = off.windows.sample(32)
+    assert batch.line_t is None and batch_rays(batch)[0].shape == (64, 3)
+
+
+def test_the_silent_lines_term_flattens_a_dish_between_its_ends(scene):
+    """One step of the term alone moves a middle that lies behind its line's plane toward it."""
+    from hybridneus.config import SilentLinesPrior as Cfg
+    from hybridneus.training.priors import SilentLinesPrior, StepContext
+    from hybridneus.training.priors.silent_lines import line_residual
+
+    depth = torch.tensor([2.0, 2.3, 2.0], requires_grad=True)
+    dirs = torch.tensor([[0.0, 0.0, 1.0]] * 3)
+    out = type("Out", (), {"depth": depth, "opacity": torch.ones(3)})()
+    batch = type("B", (), {"line_t": torch.tensor([0.5]),
+                           "forward": torch.tensor([0.0, 0.0, 1.0])})()
+    prior = SilentLinesPrior(Cfg(enabled=True, ramp=0.0, start=0.0, max_bend=0.0))
+    ctx = StepContext(None, out, torch.zeros(3, 3), dirs, 1.0, None, batch)
+    (weight, value), = prior.terms(ctx).values()
+    assert weight == prior.cfg.weight and float(value) == pytest.approx(0.3)
+    late = SilentLinesPrior(Cfg(enabled=True, start=0.5, ramp=0.2))
+    assert late.terms(StepContext(None, out, None, dirs, 0.5, None, batch)) == {}
+    (w, _), = late.terms(StepContext(None, out, None, dirs, 0.6, None, batch)).values()
+    assert w == pytest.approx(0.5 * late.cfg.weight)
+    value.backward()
+    assert depth.grad[1] > 0 and depth.grad[0] < 0 and depth.grad[2] < 0
+    assert float(line_residual(depth.detach(), torch.ones(3), dirs, batch.forward,
+                               batch.line_t)) == pytest.approx(0.3)

@@ -79,6 +79,8 @@ _RULES: list[tuple[str, typing.Callable[[Any], bool], str]] = [
     ("priors.silent_lines.max_length", lambda v: v >= 2, ">= 2"),
     ("priors.silent_lines.views", lambda v: v > 0, "> 0"),
     ("priors.silent_lines.ramp", _fraction, "a fraction of training in [0, 1]"),
+    ("priors.silent_lines.start", _fraction, "a fraction of training in [0, 1]"),
+    ("priors.silent_lines.max_bend", lambda v: v >= 0, ">= 0 (0: every line counts)"),
     ("priors.sharpness_ceiling.per_cell", lambda v: v > 0, "> 0"),
     ("priors.sharpness_floor.at", lambda v: 0 < v <= 1, "a fraction of training in (0, 1]"),
     ("priors.sharpness_floor.delay", _fraction, "a fraction of training in [0, 1]"),

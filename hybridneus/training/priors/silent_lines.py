@@ -6,8 +6,13 @@ behind a firing outline, a dish explains them as well as the plane does. On a pl
 depth is linear along any image line, so for a run of silent pixels along the window's image
 motion (:mod:`hybridneus.data.lines`) the depth of a pixel between the run's ends follows
 from theirs. The term is the mean distance, along the camera's viewing axis, between each
-middle's rendered depth and that plane's, over the lines whose three rays hit the surface;
-its weight grows from 0 over ``ramp``. The sampler renders the lines' rays with the batch
+middle's rendered depth and that plane's, over the lines whose three rays hit the surface
+and whose middle lies off the plane by at most ``max_bend`` of the line's length: a face
+that sank a little is pulled back, while a line whose middle lies far behind its ends looks
+past something in front (the body of a cage seen between two wires) and is left alone. Its
+weight grows from 0 over ``ramp`` from ``start`` of training, once the surface has formed:
+while the fit carves the initial sphere down, every line still runs across matter that must
+go. The sampler renders the lines' rays with the batch
 (:func:`hybridneus.training.objective.batch_rays`).
 """
 
@@ -27,28 +32,36 @@ def plane_depth(z_start: torch.Tensor, z_end: torch.Tensor, t: torch.Tensor) -> 
 
 
 def line_residual(depth: torch.Tensor, opacity: torch.Tensor, dirs: torch.Tensor,
-                  forward: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+                  forward: torch.Tensor, t: torch.Tensor, max_bend: float = 0.0
+                  ) -> torch.Tensor:
     """Mean |depth of each middle - plane_depth of its ends| along ``forward``.
 
     Args:
         depth: (3k,) expected distance along the ray (weighted, as the renderer's) of the
             starts, middles and ends in that order.
         opacity: (3k,) their opacities; a line counts where all three exceed 0.5.
-        dirs: (3k, 3) unit ray directions.
+        dirs: (3k, 3) unit ray directions (their origin is the same camera).
         forward: (3,) the camera's viewing axis.
         t: (k,) where each middle lies between its ends.
+        max_bend: a line counts only where its gap is at most this fraction of the distance
+            between its ends' surface points (0: every line counts).
 
     Returns:
         () the mean over the counted lines (0 when none count).
     """
     k = t.shape[0]
-    z = depth / opacity.detach().clamp_min(1e-6) * (dirs @ forward)
+    dist = depth / opacity.detach().clamp_min(1e-6)
+    z = dist * (dirs @ forward)
     z_a, z_m, z_b = z[:k], z[k:2 * k], z[2 * k:]
-    hit = (opacity.detach() > 0.5).reshape(3, k).all(dim=0)
-    if not bool(hit.any()):
-        return z.sum() * 0.0
+    count = (opacity.detach() > 0.5).reshape(3, k).all(dim=0)
     gap = (z_m - plane_depth(z_a.clamp_min(1e-3), z_b.clamp_min(1e-3), t)).abs()
-    return gap[hit].mean()
+    if max_bend > 0:
+        points = (dist[:, None] * dirs).detach()
+        length = (points[2 * k:] - points[:k]).norm(dim=-1)
+        count = count & (gap.detach() <= max_bend * length)
+    if not bool(count.any()):
+        return z.sum() * 0.0
+    return gap[count].mean()
 
 
 class SilentLinesPrior(Prior):
@@ -61,11 +74,11 @@ class SilentLinesPrior(Prior):
 
     def terms(self, ctx: StepContext) -> dict[str, tuple[float, torch.Tensor]]:
         batch = ctx.batch
-        weight = self.cfg.weight * ramp(ctx.p, 0.0, self.cfg.ramp)
+        weight = self.cfg.weight * ramp(ctx.p, self.cfg.start, self.cfg.ramp)
         if weight <= 0 or getattr(batch, "line_t", None) is None or len(batch.line_t) == 0:
             return {}
         k3 = 3 * batch.line_t.shape[0]
         out = ctx.out
         value = line_residual(out.depth[-k3:], out.opacity[-k3:], ctx.dirs[-k3:],
-                              batch.forward, batch.line_t)
+                              batch.forward, batch.line_t, self.cfg.max_bend)
         return {"silent_lines": (weight, value)}
