@@ -97,7 +97,9 @@ def test_the_middle_of_a_line_on_a_plane_lies_on_it(slope):
     sunk, _ = _plane_rays(xs, slope, bulge=0.05)
     assert float(line_residual(sunk, torch.ones(3), dirs, forward, t)) == pytest.approx(
         0.05, rel=1e-3)
-    # a depth sunk by the same distance is 0.05 behind, a line that misses is not counted
+    # a middle in front of its plane is not pulled, a line that misses is not counted
+    proud, _ = _plane_rays(xs, slope, bulge=-0.05)
+    assert float(line_residual(proud, torch.ones(3), dirs, forward, t)) == 0.0
     empty = line_residual(sunk, torch.tensor([1.0, 0.3, 1.0]), dirs, forward, t)
     assert float(empty) == 0.0
 

@@ -5,11 +5,14 @@ A face of one colour fires only along its outline, and the events hold its insid
 behind a firing outline, a dish explains them as well as the plane does. On a plane, inverse
 depth is linear along any image line, so for a run of silent pixels along the window's image
 motion (:mod:`hybridneus.data.lines`) the depth of a pixel between the run's ends follows
-from theirs. The term is the mean distance, along the camera's viewing axis, between each
-middle's rendered depth and that plane's, over the lines whose three rays hit the surface
-and whose middle lies off the plane by at most ``max_bend`` of the line's length: a face
-that sank a little is pulled back, while a line whose middle lies far behind its ends looks
-past something in front (the body of a cage seen between two wires) and is left alone. Its
+from theirs. The term is the mean depth, along the camera's viewing axis, by which each
+middle lies behind that plane, over the lines whose three rays hit the surface and whose
+middle lies behind the plane by at most ``max_bend`` of the line's length: a face that sank
+a little is pulled back, while a line whose middle lies far behind its ends looks past
+something in front (the body of a cage seen between two wires) and is left alone. It only
+pulls toward the camera: a face pushed out would move a silhouette and the events hold it,
+but one that sinks changes no event; and a smooth body of one colour so evenly lit that it
+stays silent bulges in front of its lines, where a symmetric term would flatten it. Its
 weight grows from 0 over ``ramp`` from ``start`` of training, once the surface has formed:
 while the fit carves the initial sphere down, every line still runs across matter that must
 go. The sampler renders the lines' rays with the batch
@@ -34,7 +37,8 @@ def plane_depth(z_start: torch.Tensor, z_end: torch.Tensor, t: torch.Tensor) -> 
 def line_residual(depth: torch.Tensor, opacity: torch.Tensor, dirs: torch.Tensor,
                   forward: torch.Tensor, t: torch.Tensor, max_bend: float = 0.0
                   ) -> torch.Tensor:
-    """Mean |depth of each middle - plane_depth of its ends| along ``forward``.
+    """Mean depth by which each middle lies behind the plane_depth of its ends, along
+    ``forward`` (a middle in front of it counts 0).
 
     Args:
         depth: (3k,) expected distance along the ray (weighted, as the renderer's) of the
@@ -54,7 +58,7 @@ def line_residual(depth: torch.Tensor, opacity: torch.Tensor, dirs: torch.Tensor
     z = dist * (dirs @ forward)
     z_a, z_m, z_b = z[:k], z[k:2 * k], z[2 * k:]
     count = (opacity.detach() > 0.5).reshape(3, k).all(dim=0)
-    gap = (z_m - plane_depth(z_a.clamp_min(1e-3), z_b.clamp_min(1e-3), t)).abs()
+    gap = torch.relu(z_m - plane_depth(z_a.clamp_min(1e-3), z_b.clamp_min(1e-3), t))
     if max_bend > 0:
         points = (dist[:, None] * dirs).detach()
         length = (points[2 * k:] - points[:k]).norm(dim=-1)
