@@ -202,19 +202,20 @@ class SilentLinesPrior:
     flat one does not (:mod:`hybridneus.data.lines`). Each step draws ``lines`` runs of silent
     pixels in a short window ending with the batch's, renders both ends of each and a pixel
     between them from the camera at the window's end, and penalises how far the middle's
-    depth lies from the plane through the ends (inverse depth is linear along an image line
-    on a plane). The term pulls a face that sank into a dish behind its firing outline back
-    to the plane of that outline; a line whose middle lies farther off than ``max_bend`` of
-    its length looks past something in front and is left out. Costs three rays per line.
+    depth lies behind the plane through the ends (inverse depth is linear along an image
+    line on a plane). The term pulls a face that sank into a dish behind its firing outline
+    back to the plane of that outline, and never pulls a middle in front of it; a line whose
+    middle lies farther behind than ``max_bend`` of its length looks past something in front
+    and is left out. Costs three rays per line.
     """
 
     enabled: bool = False
-    weight: float = 1.0  # weight of the mean distance of the middles from their lines' planes
+    weight: float = 1.0  # weight of the mean depth of the middles behind their lines' planes
     lines: int = 32  # silent lines per step
     min_length: int = 8  # shortest run, pixels
     max_length: int = 128  # longest run, pixels
     views: float = 2.0  # the lines' window ends at the batch's and spans this many views
-    max_bend: float = 0.1  # a line whose middle is off its plane by more (of its length) is left
+    max_bend: float = 0.1  # a line whose middle is behind its plane by more (of its length) is left
     start: float = 0.2  # fraction of training at which the weight starts to grow
     ramp: float = 0.05  # fraction of training over which the weight then grows from 0 to full
 
