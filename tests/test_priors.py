@@ -330,8 +330,9 @@ def test_resume_keeps_the_guards_learning_rate(scene, tmp_path):
 
 
 def test_silent_lines_are_rendered_with_the_batch_and_leave_the_event_term_alone(scene):
-    """The sampler adds three rays a line after the batch's pixels; the event term reads
-    the pixels only, and the prior's term is logged. Off, a batch carries no lines."""
+    """The sampler adds three rays a line after the batch's pixels once the term weighs; the
+    event term reads the pixels only, and the prior's term is logged. Off, a batch carries
+    no lines."""
     from hybridneus.training.objective import batch_rays
 
     on = tiny("train.iters=1", "priors.silent_lines.enabled=true",
@@ -345,6 +346,10 @@ def test_silent_lines_are_rendered_with_the_batch_and_leave_the_event_term_alone
         assert origins.shape == (64 + 3 * k, 3) and batch.line_dirs.shape == (3 * k, 3)
         found += k
     assert found > 0
+    # before the term's start it weighs nothing, and the batch renders no line rays
+    assert trainer.next_batch(0.1).line_t is None
+    assert trainer.next_batch(0.2).line_t is None  # the ramp starts from 0
+    assert trainer.next_batch(0.3).line_t is not None
     logs = trainer.train_step()
     assert "loss/event" in logs
     assert any(p.name == "silent_lines" for p in trainer.priors)

@@ -307,8 +307,9 @@ class EventWindowSampler:
         idx[n_pos:] = self.rng.integers(0, h * w, size=n_rays - n_pos)
         return np.stack([idx % w, idx // w], axis=1)
 
-    def sample(self, n_rays: int) -> RayBatch:
-        """A batch of ``n_rays`` pixels of one random window.
+    def sample(self, n_rays: int, lines: bool = True) -> RayBatch:
+        """A batch of ``n_rays`` pixels of one random window, with the sampler's silent
+        lines unless ``lines`` is false.
 
         Returns:
             :class:`RayBatch` on the sampler's device.
@@ -326,7 +327,7 @@ class EventWindowSampler:
         o1, d1 = camera_rays(sp.intrinsics[i], sp.distortion[i], sp.c2w[i], xy,
                              device=self.device, lens=sp.lens)
         target = self.preset.threshold * frame[xy[:, 1], xy[:, 0]]
-        extra = self._lines(t1, i) if self.lines > 0 else {}
+        extra = self._lines(t1, i) if lines and self.lines > 0 else {}
         return RayBatch(
             origins0=o0,
             dirs0=d0,

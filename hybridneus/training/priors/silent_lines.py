@@ -68,6 +68,12 @@ def line_residual(depth: torch.Tensor, opacity: torch.Tensor, dirs: torch.Tensor
     return gap[count].mean()
 
 
+def line_weight(cfg: SilentLinesConfig, p: float) -> float:
+    """The term's weight at training progress ``p`` (0 before ``start``): while it is 0 the
+    sampler draws no lines, so the batch renders no rays for them."""
+    return cfg.weight * ramp(p, cfg.start, cfg.ramp) if cfg.enabled else 0.0
+
+
 class SilentLinesPrior(Prior):
     """See the module docstring."""
 
@@ -78,7 +84,7 @@ class SilentLinesPrior(Prior):
 
     def terms(self, ctx: StepContext) -> dict[str, tuple[float, torch.Tensor]]:
         batch = ctx.batch
-        weight = self.cfg.weight * ramp(ctx.p, self.cfg.start, self.cfg.ramp)
+        weight = line_weight(self.cfg, ctx.p)
         if weight <= 0 or getattr(batch, "line_t", None) is None or len(batch.line_t) == 0:
             return {}
         k3 = 3 * batch.line_t.shape[0]
