@@ -212,7 +212,7 @@ def test_keys_removed_in_0_3_are_named_and_old_runs_still_load(tmp_path, caplog)
         section, *rest = key.split(".")
         node = Config().to_dict()[section]
         for part in rest[:-1]:
-            node = node[part]
+            node = node.get(part, {})  # a removed prior leaves no section
         assert rest[-1] not in node, key
     # a 0.2 run: every removed key saved at its default, one training switch at another
     saved = Config().to_dict()
@@ -220,11 +220,13 @@ def test_keys_removed_in_0_3_are_named_and_old_runs_still_load(tmp_path, caplog)
     saved["train"].update(replan_at=[0.05, 0.15, 0.3, 0.5, 0.7], lr_sdf_head=1.0)
     saved["field"].update(shading_degree=0, learned_background=False)
     saved["refine"].update(poses=False, pose_knots=0)
+    saved["priors"]["silent_lines"] = {"enabled": True, "weight": 1.0, "lines": 32}
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
     with caplog.at_level("INFO", logger="hybridneus"):
         cfg = load_config(tmp_path / "config.yaml")
     assert cfg.to_dict() == Config().to_dict()
     assert "render.empty_share=0.25 dropped" in caplog.text
+    assert "priors.silent_lines.enabled=True dropped" in caplog.text
     assert "lr_sdf_head" not in caplog.text  # at its default: nothing to say
     saved["field"]["shading_degree"] = 3
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))

@@ -37,7 +37,6 @@ from hybridneus.config.tree import (
     RenderConfig,
     SharpnessCeiling,
     SharpnessFloor,
-    SilentLinesPrior,
     TrainConfig,
     preset_config,
 )
@@ -46,7 +45,7 @@ __all__ = [
     "LEGACY_KEYS", "N_RAYS_BY_DEVICE", "PRESETS", "CollapseGuard", "Config", "CurvaturePrior",
     "DataConfig", "EstimateConfig", "FieldConfig", "GridConfig", "HullPrior", "LossConfig",
     "PriorsConfig", "RefineConfig", "RenderConfig", "SharpnessCeiling", "SharpnessFloor",
-    "SilentLinesPrior", "TrainConfig", "apply_overrides",
+    "TrainConfig", "apply_overrides",
     "config_from_dict", "config_markdown", "config_table", "load_config", "preset_config",
     "rays_per_step", "save_config", "set_value", "validate",
 ]

@@ -151,6 +151,15 @@ REMOVED_KEYS: dict[str, tuple[Any, bool]] = {
     "refine.pose_start": (0.5, False),
     "refine.pose_weight": (0.01, False),
     "refine.pose_gauge": (False, False),
+    "priors.silent_lines.enabled": (False, False),
+    "priors.silent_lines.weight": (1.0, False),
+    "priors.silent_lines.lines": (32, False),
+    "priors.silent_lines.min_length": (8, False),
+    "priors.silent_lines.max_length": (128, False),
+    "priors.silent_lines.views": (2.0, False),
+    "priors.silent_lines.max_bend": (0.1, False),
+    "priors.silent_lines.start": (0.2, False),
+    "priors.silent_lines.ramp": (0.05, False),
 }
 #: Old keys whose value 0 meant "off": they also set their prior's ``enabled``.
 _LEGACY_SWITCHES = {"loss.lambda_curvature", "loss.lambda_hull", "train.inv_s_floor",
@@ -168,12 +177,18 @@ def _drop_removed(data: dict[str, Any], source: str) -> tuple[dict[str, Any], li
     notes = []
     for key, (default, shapes_field) in REMOVED_KEYS.items():
         section, *middle, name = key.split(".")
-        node = out.get(section)
+        node, parents = out.get(section), []
         for part in middle:
+            parents.append((node, part))
             node = node.get(part) if isinstance(node, dict) else None
         if not isinstance(node, dict) or name not in node:
             continue
         value = node.pop(name)
+        # a removed prior leaves no empty section behind
+        while parents and node == {}:
+            parent, part = parents.pop()
+            del parent[part]
+            node = parent
         if value == default:
             continue
         if shapes_field:

@@ -194,33 +194,6 @@ class CurvaturePrior:
 
 
 @dataclass
-class SilentLinesPrior:
-    """A silent line of pixels sees one flat surface.
-
-    Assumes that a stretch of one brightness along the image's motion lies on a flat face:
-    a curved face of one colour under a fixed light is shaded unevenly and fires events, a
-    flat one does not (:mod:`hybridneus.data.lines`). Each step draws ``lines`` runs of silent
-    pixels in a short window ending with the batch's, renders both ends of each and a pixel
-    between them from the camera at the window's end, and penalises how far the middle's
-    depth lies behind the plane through the ends (inverse depth is linear along an image
-    line on a plane). The term pulls a face that sank into a dish behind its firing outline
-    back to the plane of that outline, and never pulls a middle in front of it; a line whose
-    middle lies farther behind than ``max_bend`` of its length looks past something in front
-    and is left out. Costs three rays per line.
-    """
-
-    enabled: bool = False
-    weight: float = 1.0  # weight of the mean depth of the middles behind their lines' planes
-    lines: int = 32  # silent lines per step
-    min_length: int = 8  # shortest run, pixels
-    max_length: int = 128  # longest run, pixels
-    views: float = 2.0  # the lines' window ends at the batch's and spans this many views
-    max_bend: float = 0.1  # a line whose middle is behind its plane by more (of its length) is left
-    start: float = 0.2  # fraction of training at which the weight starts to grow
-    ramp: float = 0.05  # fraction of training over which the weight then grows from 0 to full
-
-
-@dataclass
 class SharpnessFloor:
     """A lower bound on the NeuS sharpness ``inv_s`` that rises over training.
 
@@ -286,7 +259,6 @@ class PriorsConfig:
 
     hull: HullPrior = dataclasses.field(default_factory=HullPrior)
     curvature: CurvaturePrior = dataclasses.field(default_factory=CurvaturePrior)
-    silent_lines: SilentLinesPrior = dataclasses.field(default_factory=SilentLinesPrior)
     sharpness_floor: SharpnessFloor = dataclasses.field(default_factory=SharpnessFloor)
     sharpness_ceiling: SharpnessCeiling = dataclasses.field(default_factory=SharpnessCeiling)
     collapse_guard: CollapseGuard = dataclasses.field(default_factory=CollapseGuard)

@@ -109,27 +109,6 @@ def _index_ranges(
     return [(int(np.searchsorted(t, t0, side="left")), int(np.searchsorted(t, t1, side="left")))]
 
 
-def event_counts(split: SplitData, t0: float, t1: float) -> np.ndarray:
-    """(height * width, 2) per-pixel [negative, positive] event counts of the window
-    ``[t0, t1)`` (times as stored in the npz; a negative ``t0`` wraps as in
-    :func:`event_frame`)."""
-    if t0 < -split.t_max:
-        raise ValueError(f"event_frame: t0={t0} is more than one loop (T={split.t_max}) back")
-    counter = event_counter(split)
-    c = None
-    for i0, i1 in _index_ranges(split.events.t, t0, t1, split.t_max):
-        part = counter.counts(i0, i1)
-        c = part if c is None else c + part
-    return c
-
-
-def frame_from_counts(counts: np.ndarray, height: int, width: int,
-                      polarity_offset: float = 0.0) -> np.ndarray:
-    """(height, width) float32 ``E = sum(p + polarity_offset)`` from :func:`event_counts`."""
-    frame = counts[:, 1] * (1.0 + polarity_offset) + counts[:, 0] * (polarity_offset - 1.0)
-    return frame.astype(np.float32).reshape(height, width)
-
-
 def event_frame(
     split: SplitData, t0: float, t1: float, polarity_offset: float = 0.0
 ) -> np.ndarray:
@@ -146,8 +125,15 @@ def event_frame(
         (height, width) float32 ``E[y, x] = sum(p + polarity_offset)``; an event at
         column x, row y lands in ``E[y, x]``.
     """
-    return frame_from_counts(event_counts(split, t0, t1), split.height, split.width,
-                             polarity_offset)
+    if t0 < -split.t_max:
+        raise ValueError(f"event_frame: t0={t0} is more than one loop (T={split.t_max}) back")
+    counter = event_counter(split)
+    c = None
+    for i0, i1 in _index_ranges(split.events.t, t0, t1, split.t_max):
+        part = counter.counts(i0, i1)
+        c = part if c is None else c + part
+    frame = c[:, 1] * (1.0 + polarity_offset) + c[:, 0] * (polarity_offset - 1.0)
+    return frame.astype(np.float32).reshape(split.height, split.width)
 
 
 def bayer_mask(xy: np.ndarray, mosaic: str = "RGGB") -> np.ndarray:
@@ -178,13 +164,6 @@ class RayBatch:
         view1: view index of ``t1`` (an integer value).
         t0: window start as a fraction of ``T`` (wrapped into [0, 1]).
         t1: window end as a fraction of ``T``.
-        line_origins: (3 * k, 3) float32 origins of the camera at ``t1`` through the
-            :class:`~hybridneus.data.lines.Lines` of a short window ending at ``t1`` (all
-            starts, all middles, all ends), or ``None`` when the sampler draws no lines.
-        line_dirs: (3 * k, 3) float32 unit directions of those rays, or ``None``.
-        line_t: (k,) float32 where each middle lies between its start and end, or ``None``.
-        forward: (3,) float32 viewing axis of the camera at ``t1`` (depth is measured along
-            it), or ``None``.
     """
 
     origins0: torch.Tensor
@@ -198,10 +177,6 @@ class RayBatch:
     view1: float
     t0: float = 0.0
     t1: float = 0.0
-    line_origins: torch.Tensor | None = None
-    line_dirs: torch.Tensor | None = None
-    line_t: torch.Tensor | None = None
-    forward: torch.Tensor | None = None
 
     def to(self, device: str | torch.device) -> RayBatch:
         """Copy of the batch with every tensor on ``device``."""
@@ -226,10 +201,6 @@ class EventWindowSampler:
             as the EventNeuS paper) or ``"per_load"`` (integer length in 1..max_window drawn
             once per view, as the EventNeRF reference code).
         device: device of the returned tensors.
-        lines: silent lines (:func:`hybridneus.data.lines.silent_lines`) to draw per batch
-            (0: none).
-        line_length: (shortest, longest) run of a line, pixels.
-        line_views: length of the window the lines are found in, views.
 
     Raises:
         DatasetError: the split has fewer than 2 views.
@@ -247,9 +218,6 @@ class EventWindowSampler:
         seed: int = 0,
         window: Literal["per_iteration", "per_load"] = "per_iteration",
         device: str | torch.device = "cpu",
-        lines: int = 0,
-        line_length: tuple[int, int] = (8, 128),
-        line_views: float = 2.0,
     ) -> None:
         if window not in ("per_iteration", "per_load"):
             raise ConfigError(f"window: expected 'per_iteration' or 'per_load', got {window!r}")
@@ -259,9 +227,6 @@ class EventWindowSampler:
         self.preset = preset
         self.window = window
         self.device = torch.device(device)
-        self.lines = int(lines)
-        self.line_length = (int(line_length[0]), int(line_length[1]))
-        self.line_views = float(line_views)
         self.rng = np.random.default_rng(seed)
         self.n_views = split.n_views
         self.t_max = split.t_max
@@ -307,17 +272,14 @@ class EventWindowSampler:
         idx[n_pos:] = self.rng.integers(0, h * w, size=n_rays - n_pos)
         return np.stack([idx % w, idx // w], axis=1)
 
-    def sample(self, n_rays: int, lines: bool = True) -> RayBatch:
-        """A batch of ``n_rays`` pixels of one random window, with the sampler's silent
-        lines unless ``lines`` is false.
+    def sample(self, n_rays: int) -> RayBatch:
+        """A batch of ``n_rays`` pixels of one random window.
 
         Returns:
             :class:`RayBatch` on the sampler's device.
         """
         i, t0, t1 = self.draw_window()
-        counts = event_counts(self.split, t0, t1)
-        frame = frame_from_counts(counts, self.split.height, self.split.width,
-                                  self.preset.polarity_offset)
+        frame = self.frame(t0, t1)
         xy = self.pick_pixels(frame, n_rays)
         t0_wrapped = t0 + self.t_max if t0 < 0 else t0
         c2w0, k0 = self.pose_at(t0_wrapped)
@@ -327,7 +289,6 @@ class EventWindowSampler:
         o1, d1 = camera_rays(sp.intrinsics[i], sp.distortion[i], sp.c2w[i], xy,
                              device=self.device, lens=sp.lens)
         target = self.preset.threshold * frame[xy[:, 1], xy[:, 0]]
-        extra = self._lines(t1, i) if lines and self.lines > 0 else {}
         return RayBatch(
             origins0=o0,
             dirs0=d0,
@@ -341,28 +302,4 @@ class EventWindowSampler:
             view1=float(i),
             t0=t0_wrapped / self.t_max,
             t1=t1 / self.t_max,
-            **extra,
         )
-
-    def _lines(self, t1: float, i: int) -> dict:
-        """Silent lines (RayBatch's line_*) of the short window of ``line_views`` views that
-        ends at view ``i`` (time ``t1``), as rays of its camera. The batch's own window is
-        too long for them: over tens of views a face's whole image changes."""
-        from hybridneus.data.lines import changed_mask, image_motion, silent_lines
-
-        sp = self.split
-        t0 = t1 - self.line_views * self.dt
-        if not self.preset.cyclic:
-            t0 = max(t0, 0.0)
-        counts = event_counts(sp, t0, t1)
-        c2w0, _ = self.pose_at(t0 + self.t_max if t0 < 0 else t0)
-        direction = image_motion(sp.intrinsics[i], c2w0, sp.c2w[i])
-        changed = changed_mask(counts.reshape(sp.height, sp.width, 2))
-        found = silent_lines(changed, direction, self.lines, self.rng, *self.line_length)
-        xy = np.concatenate([found.start, found.middle, found.end])
-        o, d = camera_rays(sp.intrinsics[i], sp.distortion[i], sp.c2w[i], xy,
-                           device=self.device, lens=sp.lens)
-        return {"line_origins": o, "line_dirs": d,
-                "line_t": torch.as_tensor(found.t, device=self.device),
-                "forward": torch.as_tensor(sp.c2w[i][:3, 2], dtype=torch.float32,
-                                           device=self.device)}

@@ -24,13 +24,10 @@ Terms = dict[str, tuple[float, torch.Tensor]]
 
 def batch_rays(batch: RayBatch | FrameBatch) -> tuple[torch.Tensor, torch.Tensor]:
     """The rays a batch renders, (n, 3) origins and directions: an event batch's pixels at
-    the window start, then the same pixels at its end, then its silent lines' rays (if any)."""
+    the window start, then the same pixels at its end."""
     if isinstance(batch, RayBatch):
-        origins, dirs = [batch.origins0, batch.origins1], [batch.dirs0, batch.dirs1]
-        if batch.line_origins is not None:
-            origins.append(batch.line_origins)
-            dirs.append(batch.line_dirs)
-        return torch.cat(origins), torch.cat(dirs)
+        return (torch.cat([batch.origins0, batch.origins1]),
+                torch.cat([batch.dirs0, batch.dirs1]))
     return batch.origins, batch.dirs
 
 
@@ -38,7 +35,7 @@ def data_terms(out, batch: RayBatch | FrameBatch, loss: LossConfig, eps: float) 
     """The data term of ``out`` rendered from :func:`batch_rays` of ``batch``."""
     if isinstance(batch, RayBatch):
         n = batch.target.shape[0]
-        value = L.event_loss(out.color[:n], out.color[n:2 * n], batch.target, batch.bayer, eps)
+        value = L.event_loss(out.color[:n], out.color[n:], batch.target, batch.bayer, eps)
         return {"event": (loss.lambda_event, value)}
     return {"rgb": (loss.lambda_rgb, L.rgb_loss(out.color, batch.color))}
 

@@ -32,7 +32,6 @@ from hybridneus.rendering.sampling import NeuSSampler
 from hybridneus.training import schedules
 from hybridneus.training.objective import Objective, batch_rays
 from hybridneus.training.priors import StepContext, build_priors
-from hybridneus.training.priors.silent_lines import line_weight
 from hybridneus.training.scene import SceneRecord
 from hybridneus.training.state import load_trainer_state, trainer_state
 
@@ -110,11 +109,8 @@ class Trainer:
             occupancy=self.occupancy if r.occupancy else None, n_march=r.occupancy_march,
             near_min=r.near_min, chunk=r.chunk,
         )
-        lines = cfg.priors.silent_lines
-        self.windows = EventWindowSampler(
-            self.split, self.preset, seed=cfg.train.seed, window=cfg.train.window,
-            device=self.device, lines=lines.lines if lines.enabled else 0,
-            line_length=(lines.min_length, lines.max_length), line_views=lines.views)
+        self.windows = EventWindowSampler(self.split, self.preset, seed=cfg.train.seed,
+                                          window=cfg.train.window, device=self.device)
         self.frames = None
         if cfg.train.supervision == "rgb":
             from hybridneus.data.frames import FrameRaySampler
@@ -175,13 +171,11 @@ class Trainer:
             self.occupied_fraction = self.occupancy.update(
                 self.field.raw_sdf, float(self.field.inv_s().detach()), r.occupancy_band, r.chunk)
 
-    def next_batch(self, p: float = 1.0) -> RayBatch | FrameBatch:
-        """The step's pixels at progress ``p``: those of one event window (with silent lines
-        once their term weighs), or (RGB supervision) a frame's."""
+    def next_batch(self) -> RayBatch | FrameBatch:
+        """The step's pixels: those of one event window, or (RGB supervision) a frame's."""
         if self.frames is not None:
             return self.frames.sample(2 * self.record.n_rays)
-        lines = line_weight(self.cfg.priors.silent_lines, p) > 0
-        return self.windows.sample(self.record.n_rays, lines=lines).to(self.device)
+        return self.windows.sample(self.record.n_rays).to(self.device)
 
     def _set_learning_rate(self) -> float:
         t = self.cfg.train
@@ -202,7 +196,7 @@ class Trainer:
         self.field.update_step(self.timeline.position(self.step), self.total_steps)
         if self.step % max(cfg.render.occupancy_every, 1) == 0:
             self.refresh_occupancy()
-        batch = self.next_batch(p)
+        batch = self.next_batch()
         origins, dirs = batch_rays(batch)
         out = render_rays(self.field, origins, dirs, self.sampler, self.generator, True,
                           cfg.render.crop_softness)

@@ -2,7 +2,6 @@
 
 - ``hull`` (:mod:`.hull`): a constant background, so the events' visual hull is free space;
 - ``curvature`` (:mod:`.curvature`): smooth surfaces where the events are silent;
-- ``silent_lines`` (:mod:`.silent_lines`): a silent line of pixels sees one flat surface;
 - ``sharpness_floor`` (:mod:`.sharpness`): a solid, opaque object;
 - ``sharpness_ceiling`` (:mod:`.sharpness`): a surface placed no finer than the grid's cells;
 - ``collapse_guard`` (:mod:`.collapse`): the object fills part of most views.
@@ -21,7 +20,6 @@ from hybridneus.training.priors.collapse import CollapseGuard
 from hybridneus.training.priors.curvature import CurvaturePrior
 from hybridneus.training.priors.hull import HullPrior
 from hybridneus.training.priors.sharpness import SharpnessCeiling, SharpnessFloor
-from hybridneus.training.priors.silent_lines import SilentLinesPrior
 
 
 def build_priors(cfg: Config, field, free_space, aabb) -> list[Prior]:
@@ -40,8 +38,6 @@ def build_priors(cfg: Config, field, free_space, aabb) -> list[Prior]:
         out.append(HullPrior(p.hull, free_space))
     if p.curvature.enabled:
         out.append(CurvaturePrior(p.curvature))
-    if p.silent_lines.enabled:
-        out.append(SilentLinesPrior(p.silent_lines))
     if p.sharpness_floor.enabled:
         out.append(SharpnessFloor(p.sharpness_floor, math.exp(10.0 * cfg.field.inv_s_init)))
     if p.sharpness_ceiling.enabled:
@@ -53,4 +49,4 @@ def build_priors(cfg: Config, field, free_space, aabb) -> list[Prior]:
 
 
 __all__ = ["CollapseGuard", "CurvaturePrior", "HullPrior", "Prior", "RandomPoints",
-           "SharpnessCeiling", "SharpnessFloor", "SilentLinesPrior", "StepContext", "build_priors"]
+           "SharpnessCeiling", "SharpnessFloor", "StepContext", "build_priors"]
