@@ -27,7 +27,7 @@ def convert(
     calib: Annotated[Path | None, typer.Option(
         help="Calibration: Kalibr camchain YAML, OpenCV YAML/JSON, or plain JSON.")] = None,
     camera: Annotated[str | None, typer.Option(
-        help="Camera of a Kalibr camchain (default cam0).")] = None,
+        help="Camera of a Kalibr camchain or a DSEC cam_to_cam.yaml (default cam0).")] = None,
     views: Annotated[int, typer.Option(help="Views placed along the track.")] = 1000,
     spacing: Annotated[str, typer.Option(
         help="time: views uniform in time; path: uniform in the camera's path length.")]
@@ -48,8 +48,16 @@ def convert(
     topic: Annotated[str | None, typer.Option(
         help="Event topic of a ROS bag holding several. [default: the only one]",
         show_default=False)] = None,
-    pose_time_unit: Annotated[str, typer.Option(help="Unit of the pose file's timestamps.")]
-        = "s",
+    events_track: Annotated[int | None, typer.Option(
+        "--track", help="Events track (stream id) of an AEDAT4 file holding several. "
+                        "[default: the first]", show_default=False)] = None,
+    pose_time_unit: Annotated[str | None, typer.Option(
+        help="Unit of the pose file's timestamps. [default: s; ns for a rostopic echo -p "
+             "export]", show_default=False)] = None,
+    max_gap: Annotated[float | None, typer.Option(
+        help="Longest dropout of the pose track (seconds without a pose) that views may be "
+             "placed in by interpolation. [default: none; a view in a dropout is refused]",
+        show_default=False)] = None,
     clock_offset: Annotated[float, typer.Option(
         help="Seconds to add to an event time to get the pose clock's time.")] = 0.0,
     world_to_camera: Annotated[bool, typer.Option(
@@ -92,8 +100,11 @@ def convert(
 
     Example: hybridneus convert rec.aedat4 --poses mocap.txt --calib camchain.yaml data/rec
     """
+    import logging
+
     import numpy as np
 
+    from hybridneus.cli.options import log_to_stderr
     from hybridneus.errors import ConfigError, RecordingError
     from hybridneus.recordings import (
         ConvertOptions,
@@ -108,9 +119,10 @@ def convert(
     )
     from hybridneus.recordings.events import TIME_UNITS
 
+    log_to_stderr(logging.WARNING)  # what the conversion drops or doubts, one line each
     if (poses is None) == (turntable is None):
         raise RecordingError("convert: give exactly one of --poses and --turntable")
-    if pose_time_unit not in TIME_UNITS:
+    if pose_time_unit is not None and pose_time_unit not in TIME_UNITS:
         raise RecordingError(f"--pose-time-unit: expected one of {', '.join(TIME_UNITS)}, got "
                              f"{pose_time_unit!r}")
     if calib is None:
@@ -118,20 +130,22 @@ def convert(
     calibration = read_calibration(calib, camera)
     if poses is not None and is_colmap_model(poses):
         track = read_colmap_track(
-            poses, frame_times, TIME_UNITS[pose_time_unit], opengl=opengl,
+            poses, frame_times, TIME_UNITS[pose_time_unit or "s"], opengl=opengl,
             hand_eye=read_matrix(hand_eye, "--hand-eye") if hand_eye else None)
     elif poses is not None:
         if frame_times is not None:
             raise RecordingError("--frame-times: applies to a COLMAP model given as --poses")
         track = read_pose_table(
-            poses, TIME_UNITS[pose_time_unit], world_to_camera=world_to_camera, opengl=opengl,
+            poses, TIME_UNITS[pose_time_unit] if pose_time_unit else None,
+            world_to_camera=world_to_camera, opengl=opengl,
             hand_eye=read_matrix(hand_eye, "--hand-eye") if hand_eye else None)
     else:
         if world_to_camera or opengl or hand_eye:
             raise RecordingError("--turntable: its camera pose states its own conventions; "
                                  "--world-to-camera, --opengl and --hand-eye apply to --poses")
         track = read_turntable(turntable)
-    source = open_events(recording, time_unit=time_unit, columns=columns, topic=topic)
+    source = open_events(recording, time_unit=time_unit, columns=columns, topic=topic,
+                         track=events_track)
     from hybridneus.data.mosaic import check_mosaic
 
     try:
@@ -148,7 +162,8 @@ def convert(
     options = ConvertOptions(
         views=views, spacing=spacing, start=start, end=end, clock_offset=clock_offset,
         mosaic=mosaic, threshold=threshold,
-        up=np.asarray(_floats("--up", up, 3)) if up else None, box=box_values, cyclic=cyclic)
+        up=np.asarray(_floats("--up", up, 3)) if up else None, box=box_values, cyclic=cyclic,
+        max_gap=max_gap)
     typer.echo(f"{recording}: {source.note}")
     doc = convert_recording(source, track, calibration, out, options, progress=not quiet)
     ev = doc["events"]

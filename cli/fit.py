@@ -2,22 +2,11 @@
 
 from __future__ import annotations
 
-import logging
 import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
-
-
-class _StderrLines(logging.Handler):
-    """Each record as one plain line on whatever ``sys.stderr`` is when it is emitted."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            sys.stderr.write(self.format(record) + "\n")
-        except Exception:  # noqa: BLE001 - logging must never raise into the caller
-            self.handleError(record)
 
 
 def fit(
@@ -77,6 +66,7 @@ def fit(
     # faster (measured in docs/anchors); must be set before torch is first imported.
     os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")
     from hybridneus.api import fit as api_fit
+    from hybridneus.cli.options import log_to_stderr
     from hybridneus.config import load_config, preset_config
     from hybridneus.errors import ConfigError
 
@@ -102,10 +92,7 @@ def fit(
     else:
         cfg = preset_config(preset)
     if not quiet:  # the library's progress notes (e.g. the crop from the events) on stderr
-        logger = logging.getLogger("hybridneus")
-        if not any(isinstance(h, _StderrLines) for h in logger.handlers):
-            logger.addHandler(_StderrLines())
-        logger.setLevel(logging.INFO)
+        log_to_stderr()
     field = api_fit(
         data,
         cfg,

@@ -32,12 +32,16 @@ SHIFT = np.array([1.5, -0.3, 2.0])
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> dict:
-    """A simulated scene re-expressed as a recording: events in microseconds from T0, a
-    200 Hz TUM track in a metric frame (rotated, scaled, shifted, clock offset), and an
+    """See :func:`simulated_recording`."""
+    return simulated_recording(tmp_path_factory.mktemp("recording"))
+
+
+def simulated_recording(root: Path) -> dict:
+    """A simulated scene re-expressed as a recording in ``root``: events in microseconds from
+    T0, a 200 Hz TUM track in a metric frame (rotated, scaled, shifted, clock offset), and an
     OpenCV-convention calibration."""
     from hybridneus.simulate import EventModel, SimulationConfig, simulate_dataset
 
-    root = tmp_path_factory.mktemp("recording")
     cfg = SimulationConfig(n_views=16, width=32, height=24, val_views=0, test_views=0,
                            revolutions=1.0, supersample=1, spiral="even",
                            events=EventModel(mosaic="mono"))
@@ -311,9 +315,11 @@ def test_a_csv_with_named_columns_reads_like_a_tum_file(tmp_path):
 
 
 @pytest.mark.parametrize("rows, message", [
-    ([[0, 0, 0, 0, 0, 0, 0, 1], [1, 0, 0, 0, np.nan, 0, 0, 1]], "non-finite quaternion"),
-    ([[0, 0, 0, 0, 0, 0, 0, 1], [1, 0, 0, 0, 0, 0, 0, 0]], "zero quaternion"),
-    ([[0, 0, 0, 0, 0, 0, 0, 1], [0, 0, 0, 0, 0, 0, 0, 1]], "do not increase"),
+    ([[0, 0, 0, 0, 0, 0, 0, 1], [1, 0, 0, 0, np.nan, 0, 0, 1]],
+     r"1 usable pose\(s\) of 2 rows \(1 occluded"),
+    ([[0, 0, 0, 0, 0, 0, 0, 1], [1, 0, 0, 0, 0, 0, 0, 0]], r"\(1 occluded, 0 repeated"),
+    ([[0, 0, 0, 0, 0, 0, 0, 1], [0, 0, 0, 0, 0, 0, 0, 1]], r"\(0 occluded, 1 repeated"),
+    ([[1, 0, 0, 0, 0, 0, 0, 1], [0, 0, 0, 0, 0, 0, 0, 1]], "do not increase"),
     ([[0, 0, 0, 0, 0, 0, 0, 2], [1, 0, 0, 0, 0, 0, 0, 2]], "not a unit quaternion"),
     ([[0, 0, 0, 0, 0, 0, 1]], "TUM trajectory has 8"),
 ])
@@ -435,7 +441,8 @@ def test_event_readers_refuse_what_they_cannot_read(tmp_path, monkeypatch):
 
     monkeypatch.setitem(sys.modules, "faery", None)  # as if not installed
     (tmp_path / "e.aedat4").write_bytes(b"x")
-    with pytest.raises(RecordingError, match=r"pip install 'hybridneus\[faery\]'"):
+    with pytest.raises(RecordingError,
+                       match=r'pip install -e "\.\[faery\]" in the hybridneus folder$'):
         open_events(tmp_path / "e.aedat4")
 
 

@@ -110,7 +110,8 @@ class _EventArrayLayout:
 
     ROS 1 packs each event in 13 bytes. ROS 2's CDR aligns each field to its size from the
     start of the payload, so the first event (which starts 4-aligned after the array's
-    length) takes 14 bytes and every later one 16 (two bytes of padding before ``ts``).
+    length) takes 14 bytes and every later one 16 (two bytes of padding before ``ts``);
+    the message may end in up to 3 bytes of padding.
     """
 
     ROS1 = np.dtype({"names": ["x", "y", "sec", "nsec", "pol"],
@@ -153,8 +154,12 @@ class _EventArrayLayout:
                 o += 12
                 rec = np.frombuffer(body, cls.ROS1, n, o)
                 end = o + 13 * n
-            if end != len(body):
-                raise ValueError(f"{len(body) - end} bytes left over")
+            # rclcpp pads a serialised message to a multiple of 4 bytes; rosbags' own
+            # deserialiser allows the same up-to-3 bytes after the last field.
+            left = len(body) - end
+            if left < 0 or (left > (3 if ros2 else 0)):
+                raise ValueError(f"{left} bytes left over" if left > 0 else
+                                 f"{-left} bytes missing")
         except ValueError as exc:
             raise RecordingError(
                 f"{path}: an event message does not decode as EventArray ({exc})") from None

@@ -6,6 +6,9 @@ Read forms (picked from the content, not the suffix):
   distortion_model: radtan | equidistant | none, distortion_coeffs, resolution: [w, h]}``;
 - OpenCV ``FileStorage`` YAML/JSON: ``camera_matrix`` (or ``K``), ``distortion_coefficients``
   (or ``D``, ``dist``), ``image_width``, ``image_height``;
+- DSEC's ``cam_to_cam.yaml``: ``intrinsics: {camN: {camera_matrix: [fx, fy, cx, cy],
+  distortion_model, distortion_coeffs, resolution: [w, h]}}`` (``cam0`` and ``cam3`` are its
+  event cameras, ``camRectN`` their rectified forms);
 - plain JSON/YAML: ``fx fy cx cy width height`` with optional ``model`` and ``coeffs`` (or
   ``k1 k2 p1 p2 k3``).
 
@@ -78,7 +81,8 @@ def read_calibration(path: str | Path, camera: str | None = None) -> Calibration
 
     Args:
         path: the file.
-        camera: which camera of a Kalibr camchain (``cam0`` by default, or the only one).
+        camera: which camera of a Kalibr camchain or a DSEC ``cam_to_cam.yaml`` (``cam0`` by
+            default, or the only one).
 
     Raises:
         RecordingError: unreadable file, unknown form, missing or non-finite values, a lens
@@ -87,6 +91,10 @@ def read_calibration(path: str | Path, camera: str | None = None) -> Calibration
     path = Path(path)
     doc = _load(path)
     cams = {k: v for k, v in doc.items() if isinstance(v, dict) and "intrinsics" in v}
+    listed = doc.get("intrinsics")
+    if not cams and isinstance(listed, dict):  # DSEC: the cameras under one intrinsics key
+        cams = {k: _dsec_camera(v) for k, v in listed.items()
+                if isinstance(v, dict) and "camera_matrix" in v}
     if cams:
         name = camera or ("cam0" if "cam0" in cams else None)
         if name is None and len(cams) == 1:
@@ -96,6 +104,17 @@ def read_calibration(path: str | Path, camera: str | None = None) -> Calibration
                                  f"(have {', '.join(cams)}; pick one with --camera)")
         return _from_kalibr(cams[name], f"{path}:{name}")
     return _from_flat(doc, str(path))
+
+
+def _dsec_camera(cam: dict) -> dict:
+    """A DSEC ``cam_to_cam.yaml`` camera in a Kalibr camchain's terms (the same four
+    intrinsics in the same order, the same distortion keys)."""
+    out = {"intrinsics": cam["camera_matrix"],
+           "distortion_model": cam.get("distortion_model", "none"),
+           "distortion_coeffs": cam.get("distortion_coeffs", [])}
+    if "resolution" in cam:
+        out["resolution"] = cam["resolution"]
+    return out
 
 
 def _load(path: Path) -> dict:
@@ -215,7 +234,8 @@ def _pick(doc: dict, names: tuple[str, ...]):
 def _from_flat(doc: dict, source: str) -> Calibration:
     K_value = _pick(doc, ("K", "camera_matrix", "intrinsic_matrix", "cameraMatrix", "intrinsics"))
     if K_value is not None and np.asarray(
-            K_value["data"] if isinstance(K_value, dict) else K_value, dtype=object).size == 9:
+            K_value.get("data") if isinstance(K_value, dict) else K_value,
+            dtype=object).size == 9:
         K = _numbers(K_value, 9, "camera matrix", source).reshape(3, 3)
     elif all(k in doc for k in ("fx", "fy", "cx", "cy")):
         K = np.array([[_f(doc, "fx", source), float(doc.get("skew", 0.0)), _f(doc, "cx", source)],

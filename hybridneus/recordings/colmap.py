@@ -65,12 +65,9 @@ def read_colmap_track(
 
 
 def _import_pycolmap(path: Path):
-    try:
-        import pycolmap
-    except ImportError:
-        raise RecordingError(f"{path}: reading a COLMAP model needs the pycolmap package: "
-                             "pip install 'hybridneus[colmap]'") from None
-    return pycolmap
+    from hybridneus.recordings.stream import need
+
+    return need("pycolmap", path, "a COLMAP model")
 
 
 def _image_times(model: Path, names: list[str], frame_times: str | Path | None) -> np.ndarray:

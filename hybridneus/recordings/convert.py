@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +47,9 @@ class ConvertOptions:
         up: (3,) the recording frame's up direction, or None.
         box: (2, 3) corners of the region of interest in the recording frame, or None.
         cyclic: whether the track closes a loop; None: decided from the track.
+        max_gap: the longest dropout of the pose track (seconds without a sample) that views
+            may be placed in by interpolating across it; None: none, a view in a dropout
+            is refused.
     """
 
     views: int = 1000
@@ -58,6 +62,7 @@ class ConvertOptions:
     up: np.ndarray | None = None
     box: np.ndarray | None = None
     cyclic: bool | None = None
+    max_gap: float | None = None
     sources: dict = field(default_factory=dict)
 
     def check(self) -> None:
@@ -74,6 +79,8 @@ class ConvertOptions:
             raise RecordingError(f"--end ({self.end}) must be after --start ({self.start})")
         if not np.isfinite(self.clock_offset):
             raise RecordingError("--clock-offset: not a finite number")
+        if self.max_gap is not None and not self.max_gap >= 0:
+            raise RecordingError(f"--max-gap: must be >= 0 seconds, got {self.max_gap}")
 
 
 @dataclass
@@ -183,6 +190,30 @@ def view_times(track: PoseTrack, t_first: float, t_last: float, options: Convert
         raise RecordingError(f"{track.source}: --spacing path gives views at the same time "
                              "(the camera jumps); use --spacing time")
     return times
+
+
+def check_dropouts(track: PoseTrack, pose_times: np.ndarray, max_gap: float | None) -> None:
+    """Refuse views that fall in a dropout of the track longer than ``max_gap`` seconds:
+    their poses would be guessed by interpolation across it.
+
+    Args:
+        track: the pose track (its ``rows.dropouts``; a turntable has none).
+        pose_times: (views,) the views' times on the pose clock.
+        max_gap: the longest dropout interpolated across; None: none.
+
+    Raises:
+        RecordingError: naming the dropout, the views in it and the ways out.
+    """
+    rows = getattr(track, "rows", None)
+    for d in rows.dropouts if rows is not None else []:
+        inside = int(((pose_times > d.start) & (pose_times < d.end)).sum())
+        if inside and (max_gap is None or d.length > max_gap + 1e-9):
+            # the suggested value, rounded up to a millisecond, lets this dropout through
+            need = np.ceil(round(d.length * 1e3, 6)) / 1e3
+            raise RecordingError(
+                f"{track.source}: {inside} view(s) fall where the track has {d.describe()}; "
+                f"allow interpolation across it with --max-gap {need:g}, or keep the views "
+                "out of it with --start/--end")
 
 
 def _closes_loop(c2w: np.ndarray) -> bool:
@@ -302,6 +333,9 @@ def convert_recording(
     from hybridneus.progress import make_progress
 
     options.check()
+    rows = getattr(track, "rows", None)
+    for line in rows.warnings(track.source) if rows is not None else []:
+        logging.getLogger("hybridneus").warning(line)
     out = Path(out)
     check_replaceable(out)
     size = _sensor_size(source, calib)
@@ -322,6 +356,7 @@ def convert_recording(
                 f"{t0:.6f}..{t1:.6f} s (+ clock offset {options.clock_offset:g} s); "
                 "narrow --start/--end")
         times = view_times(track, t0, t1, options)
+        check_dropouts(track, times + options.clock_offset, options.max_gap)
         c2w_rec = track.at(times + options.clock_offset)
         frame = fit_frame(c2w_rec, up=options.up, box=options.box)
         c2w = frame.poses_to_normalised(c2w_rec)
@@ -411,7 +446,8 @@ def _scene_json(source, track, calib, options, scan, times, frame: SceneFrame, c
             "file_span_s": [scan.t_first_file, scan.t_last_file],
         },
         "poses": {"source": track.source, "n": len(track),
-                  "clock_offset_s": options.clock_offset},
+                  "clock_offset_s": options.clock_offset, "max_gap_s": options.max_gap,
+                  **(track.rows.to_json() if getattr(track, "rows", None) else {})},
         "calibration": calib.to_json() | {
             "layout_K_note": "principal point + 0.5 px in the layout (pixel centres at +0.5)"},
         **({"lens": {"model": calib.model, "coeffs": list(calib.coeffs)}}

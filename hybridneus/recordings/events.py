@@ -8,7 +8,7 @@ recording of 10^9 events converts in bounded memory.
 =====================  ======================================  =================================
 suffix                 format                                  reader (optional extra)
 =====================  ======================================  =================================
-``.aedat4``            iniVation DV (DAVIS346C, DVXplorer)     faery (``hybridneus[faery]``)
+``.aedat4``            iniVation DV (DAVIS346C, DVXplorer)     faery (extra ``faery``)
 ``.raw``               Prophesee EVT2 / EVT3                   faery
 ``.dat``               Prophesee DAT                           faery
 ``.es``                Event Stream                            faery
@@ -77,7 +77,8 @@ class FaerySource(EventSource):
         self._faery = faery
         self._track = track
         self.time_unit = "us"
-        self.note = f"{self.format}, {self.size[0]}x{self.size[1]} from the header, t in us"
+        self.note = (f"{self.format}{'' if track is None else f' track {track}'}, "
+                     f"{self.size[0]}x{self.size[1]} from the header, t in us")
 
     def chunks(self) -> Iterator[EventChunk]:
         try:
@@ -308,6 +309,7 @@ def open_events(
     time_unit: str | None = None,
     columns: str = "txyp",
     topic: str | None = None,
+    track: int | None = None,
 ) -> EventSource:
     """Open a recording's events by its suffix.
 
@@ -317,6 +319,8 @@ def open_events(
             the format does not fix it; None: the format's convention, or a guess (printed).
         columns: order of the columns of a text file, e.g. ``"txyp"`` or ``"xytp"``.
         topic: the event topic of a ROS bag that holds several.
+        track: the events track (stream id) of an AEDAT4 file that holds several; None:
+            the first.
 
     Raises:
         RecordingError: an unknown suffix, a missing reader, or a file the reader refuses.
@@ -337,8 +341,10 @@ def open_events(
         raise RecordingError(f"{path}: empty file (0 bytes)")
     if suffix in BAG_SUFFIXES:
         return BagSource(path, topic=topic)
+    if track is not None and suffix != ".aedat4":
+        raise RecordingError(f"--track: applies to AEDAT4 files, not {path.name}")
     if suffix in FAERY_SUFFIXES:
-        return FaerySource(path)
+        return FaerySource(path, track=track)
     if suffix in HDF5_SUFFIXES:
         return HDF5Source(path, time_unit=time_unit)
     if suffix in TEXT_SUFFIXES:

@@ -10,7 +10,7 @@ interpolated with scipy's ``Slerp``, positions linearly.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from hybridneus.errors import RecordingError
 from hybridneus.recordings.documents import read_mapping
+from hybridneus.recordings.track_rows import RowReport, clean_rows, find_dropouts
 
 #: OpenGL camera axes (x right, y up, z backward) to OpenCV's (x right, y down, z forward).
 GL_TO_CV = np.diag([1.0, -1.0, -1.0])
@@ -32,12 +33,14 @@ class PoseTrack:
         rotation: n camera-to-world rotations (scipy ``Rotation``), OpenCV camera axes.
         position: (n, 3) float64 camera centres in the world frame.
         source: where the track came from, for messages.
+        rows: what reading the rows found (rows dropped, dropouts).
     """
 
     t: np.ndarray
     rotation: Rotation
     position: np.ndarray
     source: str = ""
+    rows: RowReport = field(default_factory=RowReport)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -85,6 +88,7 @@ def make_track(
     world_to_camera: bool = False,
     opengl: bool = False,
     hand_eye: np.ndarray | None = None,
+    rows: RowReport | None = None,
 ) -> PoseTrack:
     """Build a :class:`PoseTrack` from raw samples, fixing conventions.
 
@@ -98,6 +102,8 @@ def make_track(
         hand_eye: (4, 4) pose of the camera in the tracked body's frame (marker or flange to
             camera): ``world_from_camera = world_from_body @ hand_eye``. None: the samples
             are the camera's own poses.
+        rows: what cleaning the rows found (:func:`~hybridneus.recordings.track_rows.clean_rows`);
+            the track's dropouts are added to it.
 
     Raises:
         RecordingError: fewer than two samples, non-finite values, zero quaternions, or
@@ -137,43 +143,79 @@ def make_track(
         R = R @ he[:3, :3]
     if opengl:
         R = R @ GL_TO_CV
-    return PoseTrack(t=t, rotation=Rotation.from_matrix(R), position=p, source=source)
+    report = rows if rows is not None else RowReport()
+    report.dropouts = find_dropouts(t)
+    return PoseTrack(t=t, rotation=Rotation.from_matrix(R), position=p, source=source,
+                     rows=report)
 
 
-def _read_rows(path: Path) -> tuple[list[str] | None, np.ndarray]:
-    """A text table: its header (names, if the first non-comment line is not numeric; a
-    ``#`` header as TUM files often have counts too) and its rows as floats."""
+def _fields(text: str) -> list[str]:
+    """A row's cells: split on commas, semicolons or tabs where the row has them (an empty
+    cell stays, as motion capture leaves one for a hidden body), else on whitespace."""
+    for sep in (",", ";", "\t"):
+        if sep in text:
+            return [v.strip() for v in text.split(sep)]
+    return text.split()
+
+
+def _number(cell: str) -> float | None:
+    """A cell as a float: NaN for an empty cell, None for text."""
+    if not cell:
+        return float("nan")
+    try:
+        return float(cell)
+    except ValueError:
+        return None
+
+
+@dataclass
+class _Table:
+    """A text table: its header (lower-case names, or None) and its rows."""
+
+    header: list[str] | None
+    values: np.ndarray  # (n, m) float, NaN where a cell is empty or text
+    text: np.ndarray  # (n, m) bool, where a cell holds text
+    lines: np.ndarray  # (n,) the file's line number of each row
+
+
+def _read_rows(path: Path) -> _Table:
+    """A text table. The first non-comment line is a header when a cell of it is not a
+    number (a ``#`` line too: TUM files often name their columns so)."""
     try:
         lines = path.read_text().splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise RecordingError(f"{path}: cannot read ({exc})") from None
     header: list[str] | None = None
-    rows: list[list[float]] = []
+    rows: list[list[float | None]] = []
+    numbers: list[int] = []
     for i, raw in enumerate(lines, 1):
         line = raw.strip()
         if not line:
             continue
-        text = line.lstrip("#").strip() if line.startswith("#") else line
-        parts = [v for v in text.replace(",", " ").replace(";", " ").replace("\t", " ").split()]
-        try:
-            values = [float(v) for v in parts]
-        except ValueError:
+        comment = line.startswith("#")
+        cells = _fields(line.lstrip("#").strip() if comment else line)
+        values = [_number(v) for v in cells]
+        if any(v is None for v in values):
             if not rows and header is None:
-                header = [v.strip().lower() for v in parts]
+                header = [v.strip().lower().lstrip("%") for v in cells]
                 continue
-            if line.startswith("#"):
+            if comment:
                 continue
-            raise RecordingError(f"{path}: line {i} is not a row of numbers: {line[:60]!r}") \
-                from None
-        if line.startswith("#"):
+            if header is None:
+                raise RecordingError(f"{path}: line {i} is not a row of numbers: "
+                                     f"{line[:60]!r}")
+        elif comment:
             continue
         if rows and len(values) != len(rows[0]):
             raise RecordingError(f"{path}: line {i} has {len(values)} values, the first row "
                                  f"{len(rows[0])}")
         rows.append(values)
+        numbers.append(i)
     if not rows:
         raise RecordingError(f"{path}: no pose rows")
-    return header, np.asarray(rows, dtype=np.float64)
+    text = np.array([[v is None for v in r] for r in rows], dtype=bool)
+    values = np.array([[np.nan if v is None else v for v in r] for r in rows], dtype=np.float64)
+    return _Table(header, values, text, np.asarray(numbers))
 
 
 _TIME_NAMES = ("t", "time", "timestamp", "stamp", "ts", "t[s]", "time[s]")
@@ -181,39 +223,88 @@ _POS_NAMES = (("tx", "ty", "tz"), ("x", "y", "z"), ("px", "py", "pz"),
               ("pos_x", "pos_y", "pos_z"), ("p_x", "p_y", "p_z"))
 _QUAT_NAMES = (("qx", "qy", "qz", "qw"), ("q_x", "q_y", "q_z", "q_w"),
                ("rot_x", "rot_y", "rot_z", "rot_w"), ("quat_x", "quat_y", "quat_z", "quat_w"))
+#: ``rostopic echo -p`` names a message's fields by their path (``field.pose.position.x``
+#: for a PoseStamped, ``field.pose.pose.position.x`` for an Odometry,
+#: ``field.transform.translation.x`` for a TransformStamped); its stamps are nanoseconds.
+_ROS_TIME_NAMES = ("field.header.stamp", "time")
+_ROS_POS = ("position", "translation")
+_ROS_QUAT = ("orientation", "rotation")
 
 
-def read_pose_table(path: str | Path, time_scale: float = 1.0, **conventions) -> PoseTrack:
-    """A TUM trajectory (``t tx ty tz qx qy qz qw``, ``#`` comments) or a CSV whose header
+def _ros_columns(col: dict[str, int], parents: tuple[str, ...], axes: str
+                 ) -> list[int] | None:
+    """The columns whose names end in ``<parent>.<axis>`` for one of ``parents``, if that
+    picks exactly one column per axis."""
+    for parent in parents:
+        found = [[i for n, i in col.items() if n.endswith(f".{parent}.{a}")] for a in axes]
+        if all(len(f) == 1 for f in found):
+            return [f[0] for f in found]
+    return None
+
+
+def read_pose_table(path: str | Path, time_scale: float | None = None,
+                    **conventions) -> PoseTrack:
+    """A TUM trajectory (``t tx ty tz qx qy qz qw``, ``#`` comments), a CSV whose header
     names its columns (time, position ``tx ty tz`` or ``x y z``, quaternion ``qx qy qz qw``,
-    in any order).
+    in any order), or a ``rostopic echo -p`` export of PoseStamped, Odometry or
+    TransformStamped messages (``%time,field.header.stamp,...``).
+
+    Rows as trackers write them are taken: occluded rows (NaN, empty cells, a zero
+    quaternion) and rows repeating the previous stamp are dropped and counted in the
+    track's :attr:`PoseTrack.rows`, with the gaps in time (dropouts).
 
     Args:
         path: the file.
-        time_scale: seconds per unit of its time column.
+        time_scale: seconds per unit of its time column; None: the file's own (seconds,
+            nanoseconds for a ``rostopic echo -p`` export).
         **conventions: ``world_to_camera``, ``opengl``, ``hand_eye`` of :func:`make_track`.
     """
     path = Path(path)
-    header, rows = _read_rows(path)
+    table = _read_rows(path)
+    header, rows = table.header, table.values
     if header is not None and len(header) == rows.shape[1]:
         col = {name: i for i, name in enumerate(header)}
-        t_i = next((col[n] for n in _TIME_NAMES if n in col), None)
-        pos = next((g for g in _POS_NAMES if all(n in col for n in g)), None)
-        quat = next((g for g in _QUAT_NAMES if all(n in col for n in g)), None)
-        if t_i is None or pos is None or quat is None:
+        ros = any(n.startswith("field.") for n in header)
+        if ros:
+            t_i = next((col[n] for n in _ROS_TIME_NAMES if n in col), None)
+            pos_cols = _ros_columns(col, _ROS_POS, "xyz")
+            quat_cols = _ros_columns(col, _ROS_QUAT, "xyzw")
+            default_scale = 1e-9
+        else:
+            t_i = next((col[n] for n in _TIME_NAMES if n in col), None)
+            pos = next((g for g in _POS_NAMES if all(n in col for n in g)), None)
+            quat = next((g for g in _QUAT_NAMES if all(n in col for n in g)), None)
+            pos_cols = [col[n] for n in pos] if pos else None
+            quat_cols = [col[n] for n in quat] if quat else None
+            default_scale = 1.0
+        if t_i is None or pos_cols is None or quat_cols is None:
             raise RecordingError(
                 f"{path}: header {' '.join(header)} lacks a time column, position (tx ty tz) "
                 "or quaternion (qx qy qz qw) columns")
-        t = rows[:, t_i]
-        p = rows[:, [col[n] for n in pos]]
-        q = rows[:, [col[n] for n in quat]]
+        used = [t_i, *pos_cols, *quat_cols]
+        bad = table.text[:, used]
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            raise RecordingError(f"{path}: line {table.lines[r]}, column {header[used[c]]} is "
+                                 "not a number")
+        t, p, q = rows[:, t_i], rows[:, pos_cols], rows[:, quat_cols]
     else:
+        if table.text.any():
+            r = int(np.argwhere(table.text)[0][0])
+            raise RecordingError(f"{path}: line {table.lines[r]} is not a row of numbers")
         if rows.shape[1] != 8:
             raise RecordingError(
                 f"{path}: rows have {rows.shape[1]} values; a TUM trajectory has 8 "
                 "(t tx ty tz qx qy qz qw), or name the columns in a header")
         t, p, q = rows[:, 0], rows[:, 1:4], rows[:, 4:8]
-    return make_track(t * time_scale, q, p, str(path), **conventions)
+        default_scale = 1.0
+    scale = default_scale if time_scale is None else time_scale
+    t, q, p, report = clean_rows(t * scale, q, p)
+    if t.shape[0] < 2:
+        raise RecordingError(f"{path}: {t.shape[0]} usable pose(s) of {rows.shape[0]} rows "
+                             f"({report.occluded} occluded, {report.repeated} repeated "
+                             "stamps); a track needs at least two")
+    return make_track(t, q, p, str(path), rows=report, **conventions)
 
 
 @dataclass(frozen=True)
@@ -317,17 +408,37 @@ def read_turntable(path: str | Path) -> Turntable:
                      source=str(path))
 
 
+#: Keys of a transform file that hold the camera's pose in the body's frame (``p_body =
+#: T @ p_cam``), as ``--hand-eye`` wants it.
+_BODY_FROM_CAMERA = ("T", "matrix", "T_body_cam", "T_body_camera")
+#: Keys named the other way (Kalibr's ``T_cam_imu``: ``p_cam = T @ p_imu``): inverted.
+_CAMERA_FROM_BODY = ("T_cam_body", "T_camera_body", "T_cam_imu")
+
+
 def read_matrix(text: str, what: str) -> np.ndarray:
-    """A 4x4 rigid transform from a file (16 or 12 numbers, or JSON/YAML with a
-    ``T``/``matrix`` entry) or from 16 or 12 comma-separated numbers."""
+    """A 4x4 rigid transform from a file (16 or 12 numbers, or JSON/YAML with an entry
+    named in :data:`_BODY_FROM_CAMERA`, or one in :data:`_CAMERA_FROM_BODY`, which is
+    inverted; a Kalibr ``camchain-imucam.yaml``'s ``cam0: T_cam_imu`` is read so) or from
+    16 or 12 comma-separated numbers.
+
+    Returns:
+        (4, 4) the camera's pose in the body's frame (``p_body = T @ p_cam``).
+    """
     path = Path(text)
+    invert = False
     if path.exists():
         if path.suffix.lower() in (".json", ".yaml", ".yml"):
             doc = read_mapping(path)
-            values = next((doc[k] for k in ("T", "matrix", "T_body_cam", "T_cam_body")
-                           if k in doc), None)
-            if values is None:
-                raise RecordingError(f"{path}: no T or matrix entry")
+            cam = doc.get("cam0")
+            if isinstance(cam, dict) and "T_cam_imu" in cam and not any(
+                    k in doc for k in _BODY_FROM_CAMERA + _CAMERA_FROM_BODY):
+                doc = cam
+            key = next((k for k in _BODY_FROM_CAMERA + _CAMERA_FROM_BODY if k in doc), None)
+            if key is None:
+                raise RecordingError(
+                    f"{path}: no transform entry (one of "
+                    f"{', '.join(_BODY_FROM_CAMERA + _CAMERA_FROM_BODY)})")
+            values, invert = doc[key], key in _CAMERA_FROM_BODY
         else:
             values = path.read_text().replace(",", " ").split()
         source = str(path)
@@ -345,4 +456,11 @@ def read_matrix(text: str, what: str) -> np.ndarray:
     R = m[:3, :3]
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
         raise RecordingError(f"{source}: the rotation part is not a rotation")
+    if not np.allclose(m[3], [0, 0, 0, 1]):
+        raise RecordingError(f"{source}: the last row must be 0 0 0 1")
+    if invert:
+        inv = np.eye(4)
+        inv[:3, :3] = R.T
+        inv[:3, 3] = -R.T @ m[:3, 3]
+        m = inv
     return m

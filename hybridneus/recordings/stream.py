@@ -19,7 +19,8 @@ CHUNK = 1 << 22
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
 #: Extra to install, by the module a reader imports.
-EXTRAS = {"faery": "faery", "h5py": "hdf5", "hdf5plugin": "hdf5", "rosbags": "rosbags"}
+EXTRAS = {"faery": "faery", "h5py": "hdf5", "hdf5plugin": "hdf5", "rosbags": "rosbags",
+          "pycolmap": "colmap"}
 
 
 @dataclass
@@ -60,7 +61,7 @@ def need(module: str, path: Path, what: str):
         extra = EXTRAS.get(module, module)
         raise RecordingError(
             f"{path}: reading {what} needs the {module} package: "
-            f"pip install 'hybridneus[{extra}]'"
+            f"pip install -e \".[{extra}]\" in the hybridneus folder"
         ) from None
 
 
