@@ -58,8 +58,10 @@ def convert(
         help="Longest dropout of the pose track (seconds without a pose) that views may be "
              "placed in by interpolation. [default: none; a view in a dropout is refused]",
         show_default=False)] = None,
-    clock_offset: Annotated[float, typer.Option(
-        help="Seconds to add to an event time to get the pose clock's time.")] = 0.0,
+    clock_offset: Annotated[str, typer.Option(
+        help="Seconds to add to an event time to get the pose clock's time, or auto: "
+             "estimated from the event rate and the track's speed (refused, with the reason, "
+             "where the motion cannot pin it).")] = "0",
     world_to_camera: Annotated[bool, typer.Option(
         "--world-to-camera", help="The poses map world to camera (COLMAP's); default: "
                                   "camera (or body) to world.")] = False,
@@ -160,7 +162,8 @@ def convert(
         if np.any(box_values[1] - box_values[0] <= 0):
             raise RecordingError(f"--box: {box} has no volume")
     options = ConvertOptions(
-        views=views, spacing=spacing, start=start, end=end, clock_offset=clock_offset,
+        views=views, spacing=spacing, start=start, end=end,
+        clock_offset=_clock_offset(clock_offset),
         mosaic=mosaic, threshold=threshold,
         up=np.asarray(_floats("--up", up, 3)) if up else None, box=box_values, cyclic=cyclic,
         max_gap=max_gap)
@@ -172,6 +175,11 @@ def convert(
                   if ev["n_outside_pose_track"] else "")
                + (f"; {ev['n_read'] - ev['n_in_window']:,} outside --start/--end"
                   if ev["n_in_window"] != ev["n_read"] else ""))
+    est = doc["poses"].get("clock_offset_estimate")
+    if est is not None:
+        typer.echo(f"clock offset {est['offset_s']:.4f} s +- {est['uncertainty_s'] * 1e3:.2f} ms, "
+                   "estimated from the event rate and the camera's speed (coherence "
+                   f"{est['coherence']:.2f}; {est['uncertainty_px']:.2f} px at the track's speed)")
     frame = doc["frame"]
     typer.echo(f"{views} views ({spacing} spacing, cyclic {doc['preset']['cyclic']}); "
                f"scale {frame['scale']:.4g} per metre; centre: {frame['how']}")
@@ -202,3 +210,19 @@ def _floats(option: str, text: str, n: int) -> list[float]:
     if len(values) != n or not all(math.isfinite(v) for v in values):
         raise RecordingError(f"{option}: expected {n} comma-separated numbers, got {text!r}")
     return values
+
+
+def _clock_offset(text: str) -> float | str:
+    import math
+
+    from hybridneus.errors import RecordingError
+
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise RecordingError(f"--clock-offset: expected seconds or auto, got {text!r}")
+    return value

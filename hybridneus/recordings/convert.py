@@ -41,7 +41,9 @@ class ConvertOptions:
             first event inside the pose track).
         end: event-clock seconds of the last view; later events are dropped (None: the last
             event inside the pose track).
-        clock_offset: seconds added to an event time to get the pose clock's time.
+        clock_offset: seconds added to an event time to get the pose clock's time, or
+            ``"auto"``: estimated from the event rate and the track's speed
+            (:func:`hybridneus.recordings.clock.estimate_clock_offset`).
         mosaic: the sensor's colour filter: ``mono`` or a Bayer layout (``RGGB``, ...).
         threshold: the contrast threshold C, if known (written to the preset).
         up: (3,) the recording frame's up direction, or None.
@@ -56,7 +58,7 @@ class ConvertOptions:
     spacing: str = "time"
     start: float | None = None
     end: float | None = None
-    clock_offset: float = 0.0
+    clock_offset: float | str = 0.0
     mosaic: str = "mono"
     threshold: float | None = None
     up: np.ndarray | None = None
@@ -77,7 +79,11 @@ class ConvertOptions:
             raise RecordingError(f"--threshold: must be > 0, got {self.threshold}")
         if self.start is not None and self.end is not None and self.end <= self.start:
             raise RecordingError(f"--end ({self.end}) must be after --start ({self.start})")
-        if not np.isfinite(self.clock_offset):
+        if isinstance(self.clock_offset, str):
+            if self.clock_offset != "auto":
+                raise RecordingError(f"--clock-offset: expected seconds or auto, got "
+                                     f"{self.clock_offset!r}")
+        elif not np.isfinite(self.clock_offset):
             raise RecordingError("--clock-offset: not a finite number")
         if self.max_gap is not None and not self.max_gap >= 0:
             raise RecordingError(f"--max-gap: must be >= 0 seconds, got {self.max_gap}")
@@ -344,6 +350,15 @@ def convert_recording(
                              "camera's intrinsics")
     if calib.distorted:
         _check_lens(calib, size)
+    estimate = None
+    if options.clock_offset == "auto":
+        from dataclasses import replace
+
+        from hybridneus.recordings.clock import estimate_clock_offset
+
+        estimate = estimate_clock_offset(source, track, float(calib.K[0, 0]))
+        logging.getLogger("hybridneus").info(f"{track.source}: {estimate.line()}")
+        options = replace(options, clock_offset=estimate.offset)
     with make_progress("events", disable=not progress) as bar:
         task = bar.add_task("scan", total=getattr(source, "n_events", None))
         scan = _scan(source, track, size, options,
@@ -378,6 +393,8 @@ def convert_recording(
                 np.savetxt(split / "intrinsics" / name, K4.reshape(1, 16), fmt="%.10g")
             doc = _scene_json(source, track, calib, options, scan, times, frame, cyclic,
                               n_pos, size)
+            if estimate is not None:
+                doc["poses"]["clock_offset_estimate"] = estimate.to_json()
             (tmp / "scene.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
 
