@@ -626,6 +626,42 @@ def track_section(rows: list[dict]) -> list[str]:
     return out + _command_lines(rows)
 
 
+def clock_section(rows: list[dict]) -> list[str]:
+    """bench_clock.py: the clock offset found from the data, against the truth."""
+    if not rows:
+        return []
+    out = ["## Clock offset: found from the data", "",
+           "Scenes simulated as the suite simulates them, re-timed as hand-held captures "
+           "(the camera's log-speed smooth random noise over 0.1 to 3 s with the given "
+           "standard deviation; 0: a constant speed), a 200 Hz pose track on a clock ahead "
+           "by a known offset, and the offset estimated as `convert --clock-offset auto` does "
+           "(`hybridneus.recordings.clock`). Per group of seeds: how many it answered, the "
+           "error of those (median and largest, ms), their median standard error, how many "
+           "came within 2 ms, and the refusals. Targets: within 2 ms on hand-held tracks; "
+           "refused at a constant speed. No fit.", "",
+           "| scene | seconds | speed variation | seeds | answered | error median (max), ms | "
+           "standard error, ms | within 2 ms | refused | commit | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["scene"], r["duration_s"], r["variation"], r["commit"]),
+                          []).append(r)
+    for (scene, duration, variation, commit), rs in groups.items():
+        answered = [r for r in rs if "error_ms" in r]
+        errors = [abs(r["error_ms"]) for r in answered]
+        err = f"{statistics.median(errors):.2f} ({max(errors):.2f})" if errors else "-"
+        sigma = (f"{statistics.median(r['sigma_ms'] for r in answered):.2f}" if answered
+                 else "-")
+        reasons = sorted({r["refused"].split(" (")[0].split(";")[0] for r in rs
+                          if "refused" in r})
+        refused = (f"{len(rs) - len(answered)}: {'; '.join(reasons)}"
+                   if len(answered) < len(rs) else "0")
+        out.append(f"| {scene} | {duration:g} | {variation:g} | {len(rs)} | {len(answered)} | "
+                   f"{err} | {sigma} | {sum(e <= 2.0 for e in errors)} | {refused} | "
+                   f"{commit} | {rs[-1]['date'][:10]} |")
+    return out + _command_lines(rows)
+
+
 def threshold_section(rows: list[dict]) -> list[str]:
     """bench_threshold.py: an unstated threshold taken from the frames."""
     if not rows:
@@ -780,6 +816,7 @@ def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple
     out += poses_section([r for r in results.get("poses", []) if common.reruns_today(r)])
     out += track_section(results.get("track", []))
     out += threshold_section(results.get("threshold", []))
+    out += clock_section(results.get("clock", []))
     out += budget_section(results.get("budget", []))
     out += busy_tests_section(results.get("busy_tests", []))
     out += reliability_section(results.get("reliability", []))

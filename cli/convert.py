@@ -86,6 +86,10 @@ def convert(
     cyclic: Annotated[bool | None, typer.Option(
         "--cyclic/--no-cyclic", help="The track closes a loop. [default: from the track]",
         show_default=False)] = None,
+    keep_hot_pixels: Annotated[bool, typer.Option(
+        "--keep-hot-pixels", help="Write the events of hot pixels (pixels firing far more "
+                                  "than their neighbours) too; by default they are left "
+                                  "out.")] = False,
     check: Annotated[bool, typer.Option(
         "--check", help="Also write pictures to OUT/check: the camera track, event frames with "
                         "--point/--box projected.")] = False,
@@ -166,7 +170,7 @@ def convert(
         clock_offset=_clock_offset(clock_offset),
         mosaic=mosaic, threshold=threshold,
         up=np.asarray(_floats("--up", up, 3)) if up else None, box=box_values, cyclic=cyclic,
-        max_gap=max_gap)
+        max_gap=max_gap, keep_hot_pixels=keep_hot_pixels)
     typer.echo(f"{recording}: {source.note}")
     doc = convert_recording(source, track, calibration, out, options, progress=not quiet)
     ev = doc["events"]
@@ -174,7 +178,9 @@ def convert(
                + (f"; {ev['n_outside_pose_track']:,} outside the pose track dropped"
                   if ev["n_outside_pose_track"] else "")
                + (f"; {ev['n_read'] - ev['n_in_window']:,} outside --start/--end"
-                  if ev["n_in_window"] != ev["n_read"] else ""))
+                  if ev["n_in_window"] != ev["n_read"] else "")
+               + (f"; {ev['hot_pixels']['events']:,} of {ev['hot_pixels']['n']} hot pixels "
+                  "left out" if ev["hot_pixels"]["n"] else ""))
     est = doc["poses"].get("clock_offset_estimate")
     if est is not None:
         typer.echo(f"clock offset {est['offset_s']:.4f} s +- {est['uncertainty_s'] * 1e3:.2f} ms, "

@@ -73,6 +73,12 @@ def dataset_report(ds, cfg) -> dict[str, Any]:
                            "splits": splits, "notes": list(ds.notes),
                            "frame": frame.to_json() if frame is not None else None}
     if cfg.data.split in ds.splits:
+        from hybridneus.data.hot import find_hot_pixels, pixel_counts
+
+        sp = ds[cfg.data.split]
+        hot = find_hot_pixels(pixel_counts(sp.events.x, sp.events.y, sp.width, sp.height))
+        out["hot_pixels"] = {"line": hot.line(), "pixels": [list(xy) for xy in hot.pixels()],
+                             "events": hot.events}
         found = estimate_scene(ds, cfg.estimate, cfg.data, cfg.refine)
         noise, balance = found.noise, found.balance
         if balance is None:
@@ -132,6 +138,9 @@ def _print(report: dict[str, Any]) -> None:
     say(f"preset source: {report['preset_source']}")
     if fit:
         say(f"noise: {fit['noise']}")
+        say(report["hot_pixels"]["line"] + (
+            "; hybridneus convert leaves such pixels out" if report["hot_pixels"]["events"]
+            else ""))
         for line in fit["findings"]:
             if not line.startswith("events:"):  # the noise line, shown above
                 say(f"fit: {line}")

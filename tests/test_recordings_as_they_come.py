@@ -342,3 +342,55 @@ def test_make_track_itself_still_refuses_a_bad_sample(bad, message):
     q[1] = [bad] * 4 if bad == 0 else [0, 0, bad, 1.0]
     with pytest.raises(RecordingError, match=message):
         make_track(np.array([0.0, 1.0]), q, np.zeros((2, 3)), "samples")
+
+
+def test_hot_pixels_stand_out_from_edges_thin_lines_and_quiet_corners():
+    from hybridneus.data.hot import find_hot_pixels
+
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:60, 0:80]
+    counts = rng.poisson(40 + 30 * np.sin(xx / 9.0) ** 2).astype(np.int64)
+    counts[:, 30] += 400  # a thin bright line that the camera kept crossing
+    counts[:10, 60:] = rng.poisson(2, (10, 20))  # a corner where little happens
+    hot = [(5, 7), (70, 3), (44, 50)]
+    for x, y in hot:
+        counts[y, x] = 3000
+    found = find_hot_pixels(counts)
+    assert sorted(found.pixels()) == sorted(hot)
+    assert found.events == 9000 and "hot pixels: 3" in found.line()
+    assert find_hot_pixels(np.zeros((6, 8), np.int64)).n == 0
+
+
+def test_convert_leaves_a_hot_pixel_out_and_says_so(recording, tmp_path, run_cli):
+    rec = dict(recording)
+    span = rec["t_us"][[0, -1]]
+    n_hot = 600
+    t_hot = np.linspace(span[0], span[1], n_hot).astype(np.int64)
+    order = np.argsort(np.concatenate([rec["t_us"], t_hot]), kind="stable")
+    w, h = rec["size"]
+    for key, extra in (("t_us", t_hot), ("x", np.full(n_hot, w - 3)),
+                       ("y", np.full(n_hot, 2)), ("p", np.ones(n_hot, rec["p"].dtype))):
+        rec[key] = np.concatenate([rec[key], extra.astype(rec[key].dtype)])[order]
+    events = tmp_path / "hot.npz"
+    np.savez(events, x=rec["x"], y=rec["y"], t=rec["t_us"], p=rec["p"])
+    root = recording["root"]
+    args = ["convert", str(events), "--poses", str(root / "poses.txt"), "--calib",
+            str(root / "calib.json"), "--views", "16", "--start", str(rec["view_t"][0]),
+            "--end", str(rec["view_t"][-1]), "--clock-offset", str(OFFSET), "-q"]
+    code, text, err = run_cli(args[0], args[1], str(tmp_path / "out"), *args[2:])
+    assert code == 0, err
+    assert f"hot pixels: 1 fire far more than their neighbours (({w - 3}, 2)" in err
+    assert "600 of 1 hot pixels left out" in text
+    from hybridneus.data import load_dataset
+
+    ev = load_dataset(tmp_path / "out")["train"].events
+    assert len(ev) == len(recording["x"]) and not np.any((ev.x == w - 3) & (ev.y == 2))
+    doc = json.loads((tmp_path / "out" / "scene.json").read_text())
+    assert doc["events"]["hot_pixels"] == {"n": 1, "events": 600, "pixels": [[w - 3, 2]]}
+    code, text, err = run_cli(args[0], args[1], str(tmp_path / "kept"), *args[2:],
+                              "--keep-hot-pixels")
+    assert code == 0, err
+    assert len(load_dataset(tmp_path / "kept")["train"].events) == len(recording["x"]) + 600
+    code, text, _ = run_cli("info", str(tmp_path / "kept"))
+    assert code == 0 and f"hot pixels: 1 fire far more than their neighbours (({w - 3}, 2)" \
+        in text and "convert leaves such pixels" in text

@@ -49,6 +49,8 @@ class ConvertOptions:
         up: (3,) the recording frame's up direction, or None.
         box: (2, 3) corners of the region of interest in the recording frame, or None.
         cyclic: whether the track closes a loop; None: decided from the track.
+        keep_hot_pixels: write the events of hot pixels too (:mod:`hybridneus.data.hot`);
+            by default they are left out.
         max_gap: the longest dropout of the pose track (seconds without a sample) that views
             may be placed in by interpolating across it; None: none, a view in a dropout
             is refused.
@@ -65,6 +67,7 @@ class ConvertOptions:
     box: np.ndarray | None = None
     cyclic: bool | None = None
     max_gap: float | None = None
+    keep_hot_pixels: bool = False
     sources: dict = field(default_factory=dict)
 
     def check(self) -> None:
@@ -101,6 +104,8 @@ class Scan:
     t_first: float = np.inf
     t_last: float = -np.inf
     t_last_file: float = -np.inf
+    counts: np.ndarray | None = None  # (height, width) kept events per pixel
+    hot: object = None  # HotPixels of the kept events, when they are left out
 
 
 def _sensor_size(source: EventSource, calib: Calibration | None) -> tuple[int, int]:
@@ -123,6 +128,7 @@ def _scan(source: EventSource, track: PoseTrack, size: tuple[int, int],
     scan = Scan()
     last_t = -np.inf
     w, h = size
+    scan.counts = np.zeros(w * h, dtype=np.int64)
     for chunk in source.chunks():
         if len(chunk) == 0:
             continue
@@ -147,11 +153,14 @@ def _scan(source: EventSource, track: PoseTrack, size: tuple[int, int],
         n = int(keep.sum())
         if n:
             scan.n_kept += n
+            scan.counts += np.bincount(chunk.y[keep].astype(np.int64) * w + chunk.x[keep],
+                                       minlength=w * h)
             kept_t = chunk.t[keep]
             scan.t_first = min(scan.t_first, float(kept_t[0]))
             scan.t_last = max(scan.t_last, float(kept_t[-1]))
         progress(len(chunk))
     scan.t_last_file = last_t
+    scan.counts = scan.counts.reshape(h, w)
     if scan.n_read == 0:
         raise RecordingError(f"{source.path}: no events")
     if scan.n_window == 0:
@@ -266,6 +275,8 @@ def _write_events(source: EventSource, track: PoseTrack, scan: Scan, times: np.n
                 continue
             keep = _in_window(chunk.t, options)
             keep &= track.covers(chunk.t + options.clock_offset)
+            if scan.hot is not None:
+                keep &= ~scan.hot.mask[chunk.y, chunk.x]
             part = chunk.select(keep)
             if len(part) == 0:
                 progress(len(chunk))
@@ -363,6 +374,15 @@ def convert_recording(
         task = bar.add_task("scan", total=getattr(source, "n_events", None))
         scan = _scan(source, track, size, options,
                      lambda n: bar.advance(task, n))
+        if not options.keep_hot_pixels:
+            from hybridneus.data.hot import find_hot_pixels
+
+            hot = find_hot_pixels(scan.counts)
+            if hot.n:
+                scan.hot = hot
+                scan.n_kept -= hot.events
+                logging.getLogger("hybridneus").warning(
+                    f"{source.path}: {hot.line()}; left out (--keep-hot-pixels keeps them)")
         t0 = scan.t_first if options.start is None else options.start
         t1 = scan.t_last if options.end is None else options.end
         if not (track.covers(np.array([t0, t1]) + options.clock_offset).all()):
@@ -459,6 +479,9 @@ def _scene_json(source, track, calib, options, scan, times, frame: SceneFrame, c
             "source": str(source.path), "format": source.format, "read_as": source.note,
             "n_read": scan.n_read, "n_in_window": scan.n_window,
             "n_outside_pose_track": scan.n_outside_track, "n_written": scan.n_kept,
+            "hot_pixels": ({"n": scan.hot.n, "events": scan.hot.events,
+                            "pixels": [list(xy) for xy in scan.hot.pixels()]}
+                           if scan.hot is not None else {"n": 0, "events": 0, "pixels": []}),
             "n_positive": n_pos, "start_s": options.start, "end_s": options.end,
             "file_span_s": [scan.t_first_file, scan.t_last_file],
         },

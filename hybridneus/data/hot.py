@@ -1,0 +1,88 @@
+"""Hot pixels: sensor pixels that fire on their own, far more often than their neighbours.
+
+A real event sensor has a few pixels whose reset or comparator leaks, so that they fire tens
+to hundreds of times a second whatever the light does. Over a recording in which the camera
+or the object moves, an edge crosses many pixels and the event count per pixel varies slowly
+across the image; a hot pixel stands alone, far above every pixel around it. A pixel is hot
+when its count is at least :data:`MIN_RATIO` times the largest count of its eight neighbours
+(each plus one) and at least :data:`MIN_EVENTS`. The largest neighbour, not a typical one,
+keeps a thin line that the camera crossed again and again (a wire, a printed stroke) out:
+the line's own pixels neighbour each other.
+
+Its events would ask the fit for a brightness change that no surface makes, so
+``hybridneus convert`` leaves them out of the dataset it writes (``--keep-hot-pixels`` keeps
+them) and says which pixels they were; ``hybridneus info`` reports any it finds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Least count over the largest neighbour's for a hot pixel (each plus one) ...
+MIN_RATIO = 5.0
+#: ... and least events over the recording.
+MIN_EVENTS = 50
+
+
+@dataclass(frozen=True)
+class HotPixels:
+    """The hot pixels of a recording.
+
+    Attributes:
+        mask: (height, width) bool, True at a hot pixel.
+        counts: (height, width) the events per pixel they were found from.
+        ratio: (height, width) each pixel's count over its largest neighbour's (each plus 1).
+    """
+
+    mask: np.ndarray
+    counts: np.ndarray
+    ratio: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.mask.sum())
+
+    @property
+    def events(self) -> int:
+        """Events the hot pixels fired."""
+        return int(self.counts[self.mask].sum())
+
+    def pixels(self) -> list[tuple[int, int]]:
+        """The hot pixels as ``(x, y)``, the loudest first."""
+        ys, xs = np.nonzero(self.mask)
+        order = np.argsort(-self.counts[ys, xs], kind="stable")
+        return [(int(xs[k]), int(ys[k])) for k in order]
+
+    def line(self) -> str:
+        """One line for a report."""
+        if not self.n:
+            return "hot pixels: none"
+        total = max(int(self.counts.sum()), 1)
+        shown = ", ".join(f"({x}, {y}) x{self.ratio[y, x]:.0f}" for x, y in self.pixels()[:5])
+        more = f" and {self.n - 5} more" if self.n > 5 else ""
+        return (f"hot pixels: {self.n} fire far more than their neighbours ({shown}{more}); "
+                f"{self.events:,} events, {self.events / total:.1%} of all")
+
+
+def pixel_counts(x: np.ndarray, y: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height, width) int64 events per pixel."""
+    flat = np.asarray(y, np.int64) * width + np.asarray(x, np.int64)
+    return np.bincount(flat, minlength=width * height).reshape(height, width)
+
+
+def find_hot_pixels(counts: np.ndarray) -> HotPixels:
+    """The hot pixels of an image of event counts (module docstring)."""
+    from scipy.ndimage import maximum_filter
+
+    counts = np.asarray(counts)
+    ring = np.ones((3, 3), bool)
+    ring[1, 1] = False
+    around = maximum_filter(counts, footprint=ring, mode="mirror")
+    ratio = (counts + 1.0) / (around + 1.0)
+    mask = (ratio >= MIN_RATIO) & (counts >= MIN_EVENTS)
+    return HotPixels(mask, counts, ratio)
+
+
+__all__ = ["HotPixels", "MIN_EVENTS", "MIN_RATIO", "find_hot_pixels", "pixel_counts"]
