@@ -18,6 +18,7 @@ class Spiral(str, Enum):
 class NoisePreset(str, Enum):
     none = "none"
     real = "real"
+    davis346 = "davis346"
 
 
 def simulate(
@@ -42,7 +43,9 @@ def simulate(
         help="Bounding-sphere radius of the normalised object (cameras at 1/1.1).")] = 0.4,
     supersample: Annotated[int, typer.Option(
         help="Rays per pixel along each axis (anti-aliasing).")] = 2,
-    threshold: Annotated[float, typer.Option(help="Contrast threshold C (log units).")] = 0.2,
+    threshold: Annotated[float | None, typer.Option(
+        help="Contrast threshold C (log units). [default: 0.2; with --noise davis346 the "
+             "DAVIS346's]", show_default=False)] = None,
     eps: Annotated[float, typer.Option(help="eps in log(I^2.2 + eps).")] = 1e-3,
     sensor: Annotated[str, typer.Option(
         help="The sensor's colour filter: a Bayer layout (RGGB, BGGR, GRBG, GBRG) or mono "
@@ -50,8 +53,15 @@ def simulate(
     k1: Annotated[float, typer.Option(help="Radial distortion k1 (writes 5x4 intrinsics).")] = 0.0,
     k2: Annotated[float, typer.Option(help="Radial distortion k2.")] = 0.0,
     noise: Annotated[NoisePreset, typer.Option(
-        help="none, or real: threshold mismatch 0.03, background activity, hot pixels and a "
-             "polarity offset of -0.4 (each overridable below).")] = NoisePreset.none,
+        help="none; real: threshold mismatch 0.03, background activity, hot pixels and a "
+             "polarity offset of -0.4; davis346: a DAVIS346 at indoor light (its ON/OFF "
+             "thresholds, mismatch, 0.1 Hz background activity, hot pixels at 100 Hz, 0.5 ms "
+             "refractory period, 0.1 ms timestamp jitter; docs/simulate.md), views "
+             "--view-seconds apart. Each is overridable below.")] = NoisePreset.none,
+    view_seconds: Annotated[float, typer.Option(
+        help="Seconds between views, for --noise davis346's rates.")] = 0.03,
+    jitter: Annotated[float | None, typer.Option(
+        help="Timestamp jitter (standard deviation) in frame units.")] = None,
     threshold_sigma: Annotated[float | None, typer.Option(
         help="Per-pixel threshold standard deviation.")] = None,
     background_rate: Annotated[float | None, typer.Option(
@@ -112,23 +122,31 @@ def simulate(
 
     from hybridneus.errors import ConfigError
     from hybridneus.simulate import (
+        DAVIS346_THRESHOLD,
         REALISTIC_NOISE,
         CaptureErrors,
         EventModel,
         NoiseConfig,
         Shading,
         SimulationConfig,
+        davis346_noise,
         simulate_dataset,
     )
 
-    base_noise = REALISTIC_NOISE if noise is NoisePreset.real else NoiseConfig()
-    offset = -0.4 if noise is NoisePreset.real else 0.0
+    if not view_seconds > 0:
+        raise ConfigError(f"--view-seconds: must be > 0, got {view_seconds}")
+    base_noise = {NoisePreset.real: REALISTIC_NOISE,
+                  NoisePreset.davis346: davis346_noise(view_seconds)}.get(noise, NoiseConfig())
+    offset = {NoisePreset.real: -0.4, NoisePreset.davis346: DAVIS346_THRESHOLD[1]}.get(noise,
+                                                                                        0.0)
+    if threshold is None:
+        threshold = DAVIS346_THRESHOLD[0] if noise is NoisePreset.davis346 else 0.2
     if polarity_offset is not None:
         offset = polarity_offset
     changes = {k: v for k, v in {
         "threshold_sigma": threshold_sigma, "background_rate": background_rate,
         "hot_pixel_fraction": hot_pixels, "hot_pixel_rate": hot_pixel_rate,
-        "refractory": refractory}.items() if v is not None}
+        "refractory": refractory, "jitter": jitter}.items() if v is not None}
     for key, value in changes.items():
         if value < 0:
             raise ConfigError(f"--{key.replace('_', '-')}: must be >= 0, got {value}")

@@ -285,6 +285,25 @@ def test_cli_simulate_builtin_and_errors(tmp_path):
     assert _cli("simulate", "--help").returncode == 0
 
 
+def test_cli_simulates_a_davis346(tmp_path):
+    from hybridneus.simulate import DAVIS346_THRESHOLD
+
+    res = _cli("simulate", "builtin:thin", str(tmp_path / "davis"), "--views", "12", "--width",
+               "32", "--height", "24", "--val-views", "0", "--test-views", "0", "--noise",
+               "davis346", "--view-seconds", "0.05", "--hot-pixel-rate", "7", "-q")
+    assert res.returncode == 0, res.stderr
+    info = json.loads((tmp_path / "davis" / "scene.json").read_text())
+    assert info["preset"]["threshold"] == pytest.approx(DAVIS346_THRESHOLD[0])
+    assert info["preset"]["polarity_offset"] == pytest.approx(DAVIS346_THRESHOLD[1])
+    noise = info["noise"]
+    assert noise["jitter"] == pytest.approx(0.0001 / 0.05)
+    assert noise["background_rate"] == pytest.approx(0.1 * 0.05)
+    assert noise["hot_pixel_rate"] == 7.0  # an option overrides the preset's value
+    res = _cli("simulate", "builtin:thin", str(tmp_path / "o"), "--noise", "davis346",
+               "--view-seconds", "0")
+    assert res.returncode == 2 and "--view-seconds: must be > 0" in res.stderr
+
+
 @pytest.mark.slow
 def test_full_default_dataset_round_trip(tmp_path):
     """The paper's setting (999 views, 346 x 260, 2x2 supersampling) end to end."""

@@ -153,3 +153,41 @@ def test_event_model_validation():
         EventModel(threshold=0)
     with pytest.raises(ValueError):
         EventModel(polarity_offset=1.5)
+
+
+def test_timestamp_jitter_moves_events_within_their_interval():
+    clean = _run(NoiseConfig())
+    jittered = _run(NoiseConfig(jitter=0.05))
+    assert _count(clean) == _count(jittered)
+    for k, (a, b) in enumerate(zip(clean, jittered, strict=True), 1):
+        assert len(a) == len(b)
+        assert np.all(np.diff(b.t) >= 0) and np.all((b.t > k - 1) & (b.t <= k))
+    t_a = np.sort(np.concatenate([c.t for c in clean]))
+    t_b = np.sort(np.concatenate([c.t for c in jittered]))
+    assert 0 < np.abs(t_a - t_b).mean() < 0.05
+
+
+def test_a_davis346_has_its_thresholds_and_finds_its_own_hot_pixels():
+    from hybridneus.data.hot import find_hot_pixels, pixel_counts
+    from hybridneus.simulate import DAVIS346_THRESHOLD, davis346_noise
+
+    c, o = DAVIS346_THRESHOLD
+    assert np.exp(c * (1 + o)) == pytest.approx(1.143) and np.exp(c * (1 - o)) == \
+        pytest.approx(1.225)
+    noise = davis346_noise(0.03)
+    assert noise.background_rate == pytest.approx(0.003) and noise.hot_pixel_rate == \
+        pytest.approx(3.0) and noise.refractory == pytest.approx(0.5 / 30)
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(1)  # a smooth texture sliding by a pixel a view
+    base = 0.5 + 4 * gaussian_filter(rng.normal(0, 0.1, (120, 160, 3)), (4, 4, 0))
+    frames = [np.clip(np.roll(base, k, axis=1), 0.05, 1) for k in range(60)]
+    sim = EventSimulator(frames[0], EventModel(threshold=c, polarity_offset=o), noise, seed=3)
+    chunks = [sim.step(f) for f in frames[1:]]
+    x = np.concatenate([ch.x for ch in chunks])
+    y = np.concatenate([ch.y for ch in chunks])
+    hot = find_hot_pixels(pixel_counts(x, y, 160, 120))
+    truth = sorted((int(i % 160), int(i // 160)) for i in sim._hot)
+    assert len(truth) == 2 and sorted(hot.pixels()) == truth
+    with pytest.raises(ValueError, match="view_seconds"):
+        davis346_noise(0.0)

@@ -17,6 +17,7 @@ from hybridneus.simulate.dataset import (
     with_overrides,
 )
 from hybridneus.simulate.events import (
+    DAVIS346_THRESHOLD,
     REALISTIC_NOISE,
     EventChunk,
     EventModel,
@@ -24,6 +25,7 @@ from hybridneus.simulate.events import (
     NoiseConfig,
     SimulationError,
     bayer_channel,
+    davis346_noise,
     log_intensity,
     mosaic_rggb,
 )
@@ -41,12 +43,14 @@ from hybridneus.simulate.trajectory import (
 __all__ = [
     "BUILTIN_SCENES",
     "CAMERA_RADIUS",
+    "DAVIS346_THRESHOLD",
     "REALISTIC_NOISE",
     "CaptureErrors",
     "EventChunk",
     "EventModel",
     "EventSimulator",
     "NoiseConfig",
+    "davis346_noise",
     "Normalization",
     "PinholeCamera",
     "Renderer",
