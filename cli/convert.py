@@ -189,8 +189,15 @@ def convert(
     frame = doc["frame"]
     typer.echo(f"{views} views ({spacing} spacing, cyclic {doc['preset']['cyclic']}); "
                f"scale {frame['scale']:.4g} per metre; centre: {frame['how']}")
+    from hybridneus.data import load_dataset
+    from hybridneus.data.hull import background_fires
+
+    clutter = background_fires(load_dataset(out, splits="train")["train"])
+    if clutter is not None:
+        logging.getLogger("hybridneus").warning(
+            f"{out}: {clutter}. A fit takes no crop from the events and leaves the hull "
+            "prior off; give the object's region with --box (or a backdrop behind it)")
     if check:
-        from hybridneus.data import load_dataset
         from hybridneus.recordings.check import write_check
         from hybridneus.recordings.frame import read_scene_frame
 

@@ -288,3 +288,48 @@ def test_cli_fit_says_which_crop_it_took(scene, tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     assert "from the events' visual hull (preset: r 1," in proc.stderr
+
+
+def _cluttered(scene, tmp_path):
+    """A copy of ``_without_crop(scene)`` whose background fires too: a smooth texture behind
+    the object, sliding a pixel a view, adds its events everywhere in the image."""
+    from scipy.ndimage import gaussian_filter
+
+    from hybridneus.simulate import EventModel, EventSimulator
+
+    loose = _without_crop(scene, tmp_path)
+    path = loose / "train" / "events" / "events.npz"
+    ev = dict(np.load(path))
+    split = load_dataset(loose)["train"]
+    rng = np.random.default_rng(0)
+    base = 0.5 + 4 * gaussian_filter(rng.normal(0, 0.1, (48, 64 + split.n_views, 3)),
+                                     (3, 3, 0))
+    frames = [np.clip(base[:, k:k + 64], 0.05, 1) for k in range(split.n_views)]
+    sim = EventSimulator(frames[0], EventModel(threshold=0.2))
+    back = [sim.step(f) for f in frames[1:]]
+    for key in ("x", "y", "t", "p"):
+        ev[key] = np.concatenate([ev[key], *[getattr(c, key) for c in back]])
+    order = np.argsort(ev["t"], kind="stable")
+    np.savez(path, **{k: v[order] for k, v in ev.items()})
+    return loose
+
+
+def test_a_background_that_fires_turns_the_crop_and_the_hull_off_with_a_warning(
+        scene, tmp_path, caplog, run_cli):
+    from hybridneus.api import load_training_data
+    from hybridneus.config import preset_config
+    from hybridneus.data.estimate import estimate_scene, training_data
+    from hybridneus.data.hull import background_fires
+
+    assert background_fires(load_dataset(scene)["train"]) is None
+    cluttered = _cluttered(scene, tmp_path)
+    why = background_fires(load_dataset(cluttered)["train"])
+    assert why is not None and "the background fires events" in why, why
+    cfg = preset_config("fast")
+    found = estimate_scene(load_training_data(cfg, cluttered), cfg.estimate, cfg.data)
+    assert found.dataset.preset.crop_r == 1.0 and "crop_r" not in found.taken
+    assert any("--box" in w and "hull prior is off" in w for w in found.warnings)
+    data = training_data(found.dataset, cfg)
+    assert data.free_space is None and "hull: off, the events fill the image" in caplog.text
+    code, text, _ = run_cli("info", str(cluttered))
+    assert code == 0 and "warning: the events fill the image" in text

@@ -205,10 +205,19 @@ def _polarity_offset(found: Estimates, split) -> None:
 
 
 def _crop(found: Estimates, split) -> None:
-    from hybridneus.data.hull import NOTHING_OUTLINED, event_hull_crop
+    from hybridneus.data.hull import NOTHING_OUTLINED, background_fires, event_hull_crop
 
     p = found.dataset.preset
     crop = (p.crop_r, p.crop_y_min, p.crop_y_max)
+    clutter = background_fires(split)
+    if clutter is not None:
+        found.lines.append(f"crop: keeping the preset's (r {p.crop_r:g}, y {p.crop_y_min:g} .. "
+                           f"{p.crop_y_max:g}): {clutter}")
+        found.warnings.append(
+            f"{clutter}; the crop is not taken from the events and the hull prior is off. "
+            "Give the object's region: hybridneus convert --box X0,Y0,Z0,X1,Y1,Z1, or --set "
+            "data.crop_r=R --set data.crop_y_min=Y0 --set data.crop_y_max=Y1")
+        return
     tight = event_hull_crop(split, crop)
     if tight is None or all(abs(a - b) < 1e-6 for a, b in zip(tight, crop, strict=True)):
         why = NOTHING_OUTLINED if tight is None else "it is inside the events' hull"
@@ -288,7 +297,14 @@ def training_data(dataset: EventDataset, cfg: Config, pose_window: int | None = 
         split = dataclasses.replace(
             split, c2w=smooth_track(split.c2w, window, cfg.refine.pose_smoothing_order))
     free = None
+    clutter = None
     if cfg.priors.hull.enabled:
+        from hybridneus.data.hull import background_fires
+
+        clutter = background_fires(split)
+        if clutter is not None:
+            log.warning(f"hull: off, {clutter}")
+    if cfg.priors.hull.enabled and clutter is None:
         from hybridneus.data.hull import NOTHING_OUTLINED, event_free_space
 
         p = dataset.preset

@@ -330,6 +330,37 @@ def event_hull_crop(
     return radius, max(y0, float(pts[:, 1].min()) - pad), min(y1, float(pts[:, 1].max()) + pad)
 
 
+#: A view whose outline covers this share of the image or more sees events all over it ...
+CLUTTER_COVER = 0.8
+#: ... and a split is cluttered when at least this share of its outlined views do.
+CLUTTER_VIEWS = 0.5
+
+
+def background_fires(split: SplitData) -> str | None:
+    """Why the split's background seems to fire events, or ``None`` when it does not.
+
+    Against a constant background a view's events outline the object, a part of the image.
+    A desk, a lab or a moving background behind it fires wherever the camera's motion sweeps
+    an edge: the outline (the one the crop and the hull prior use, about 160 views) then
+    covers nearly the whole image, or the events are so dense everywhere that the noise
+    filter cannot tell an outline at all and the view is skipped. The hull's free space and
+    the crop from it assume the former; when at least :data:`CLUTTER_VIEWS` of the views
+    are filled so (an outline over :data:`CLUTTER_COVER` of the image, or none), they would
+    carve nothing or cut the object, so both are left out and the caller says so."""
+    step = hull_view_step(split)
+    _, masks = event_silhouettes(split, step=step)
+    candidates = len(range(1, split.n_views - 1, step))
+    if candidates == 0:
+        return None
+    filled = candidates - len(masks) + sum(float(m.mean()) >= CLUTTER_COVER for m in masks)
+    share = filled / candidates
+    if share < CLUTTER_VIEWS:
+        return None
+    return (f"the events fill the image in {share:.0%} of {candidates} views (an outline over "
+            f"{CLUTTER_COVER:.0%} of it, or too dense to outline): the background fires events "
+            "(clutter behind the object, a moving background, or noise too dense to filter)")
+
+
 class FreeSpace:
     """Where an :class:`EventHull` says there is no matter, as a lookup on torch points.
 
