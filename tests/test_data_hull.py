@@ -316,11 +316,14 @@ def _cluttered(scene, tmp_path):
 
 def test_a_background_that_fires_turns_the_crop_and_the_hull_off_with_a_warning(
         scene, tmp_path, caplog, run_cli):
+    import logging
+
     from hybridneus.api import load_training_data
     from hybridneus.config import preset_config
     from hybridneus.data.estimate import estimate_scene, training_data
     from hybridneus.data.hull import background_fires
 
+    caplog.set_level(logging.WARNING, logger="hybridneus")
     assert background_fires(load_dataset(scene)["train"]) is None
     cluttered = _cluttered(scene, tmp_path)
     why = background_fires(load_dataset(cluttered)["train"])

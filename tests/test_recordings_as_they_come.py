@@ -79,6 +79,9 @@ def _convert(recording: dict, poses: Path, out: Path, **kw):
 
 
 def test_views_in_a_dropout_are_refused_unless_max_gap_allows_them(recording, tmp_path, caplog):
+    import logging
+
+    caplog.set_level(logging.WARNING, logger="hybridneus")
     rows = _rows(recording)
     gap = [r for k, r in enumerate(rows) if not 22 <= k < 31]  # 9 samples: views 6 and 7 lost
     poses = _csv(tmp_path / "gap.csv", gap)

@@ -16,12 +16,12 @@ from hybridneus.recordings.colmap import is_colmap_model, read_colmap_track
 from hybridneus.recordings.convert import ConvertOptions, convert_recording
 from hybridneus.recordings.events import EventChunk, EventSource, open_events
 from hybridneus.recordings.frame import SceneFrame, fit_frame, read_scene_frame
+from hybridneus.recordings.pose_tables import read_pose_table
 from hybridneus.recordings.poses import (
     PoseTrack,
     Turntable,
     make_track,
     read_matrix,
-    read_pose_table,
     read_turntable,
 )
 

@@ -282,3 +282,34 @@ def _f(doc: dict, key: str, source: str) -> float:
     if not np.isfinite(v):
         raise RecordingError(f"{source}: {key} is not finite")
     return v
+
+
+def check_lens(calib: Calibration, size: tuple[int, int]) -> None:
+    """Refuse a lens whose undistortion does not invert over the whole image (coefficients
+    far from any real lens), before anything is written."""
+    from hybridneus.data.lens import Lens
+    from hybridneus.errors import DatasetError
+
+    lens = Lens(calib.model, calib.coeffs, calib.layout_K(), *size)
+    try:
+        table = lens.table
+    except DatasetError:
+        table = None
+    if table is not None:
+        back = lens.project(table.reshape(-1, 2)).reshape(size[1], size[0], 2)
+        u, v = np.meshgrid(np.arange(size[0]) + 0.5, np.arange(size[1]) + 0.5)
+        err = float(np.abs(back - np.stack([u, v], -1)).max())
+    if table is None or not err < 0.01:
+        raise RecordingError(
+            f"{calib.source}: the {calib.model} lens {list(calib.coeffs)} does not invert over "
+            f"the {size[0]}x{size[1]} image (rays would be wrong); check the coefficients")
+    # the undistorted image's width against the pinhole's: a real lens stays within a few
+    # times (a 170-degree fisheye: about 8); coefficients in the wrong units or order do not
+    row = table[size[1] // 2, :, 0]
+    K = calib.layout_K()
+    ratio = float((row[-1] - row[0]) / ((size[0] - 1) / K[0, 0]))
+    if not 0.2 < ratio < 20.0:
+        raise RecordingError(
+            f"{calib.source}: the {calib.model} lens {list(calib.coeffs)} makes the image "
+            f"{ratio:.3g} times as wide as without it, far from any real lens (coefficients "
+            "in the wrong units or order?)")

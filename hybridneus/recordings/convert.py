@@ -21,10 +21,11 @@ import numpy as np
 
 from hybridneus.errors import RecordingError
 from hybridneus.fileio import atomic_dir
-from hybridneus.recordings.calibration import Calibration
+from hybridneus.recordings.calibration import Calibration, check_lens
 from hybridneus.recordings.events import EventSource
 from hybridneus.recordings.frame import SceneFrame, box_crop, fit_frame
 from hybridneus.recordings.poses import PoseTrack
+from hybridneus.recordings.views import check_dropouts, closes_loop, view_times
 
 MOSAICS = ("mono", "RGGB", "BGGR", "GRBG", "GBRG")
 SPACINGS = ("time", "path")
@@ -185,61 +186,6 @@ def _in_window(t: np.ndarray, options: ConvertOptions) -> np.ndarray:
     return keep
 
 
-def view_times(track: PoseTrack, t_first: float, t_last: float, options: ConvertOptions
-               ) -> np.ndarray:
-    """(views,) event-clock times of the views, from ``t_first`` to ``t_last``."""
-    if options.spacing == "time":
-        return np.linspace(t_first, t_last, options.views)
-    dense = np.linspace(t_first, t_last, max(20 * options.views, 10_000))
-    travelled = track.path_length(dense + options.clock_offset)
-    travelled -= travelled[0]
-    if not travelled[-1] > 0:
-        raise RecordingError(f"{track.source}: --spacing path needs a moving camera; the "
-                             "camera stands still over the kept events")
-    targets = np.linspace(0.0, travelled[-1], options.views)
-    # The path length may stand still (a pause): take the first time it reaches each target.
-    idx = np.searchsorted(travelled, targets, side="left").clip(0, len(dense) - 1)
-    times = dense[idx]
-    times[0], times[-1] = t_first, t_last
-    if np.any(np.diff(times) <= 0):
-        raise RecordingError(f"{track.source}: --spacing path gives views at the same time "
-                             "(the camera jumps); use --spacing time")
-    return times
-
-
-def check_dropouts(track: PoseTrack, pose_times: np.ndarray, max_gap: float | None) -> None:
-    """Refuse views that fall in a dropout of the track longer than ``max_gap`` seconds:
-    their poses would be guessed by interpolation across it.
-
-    Args:
-        track: the pose track (its ``rows.dropouts``; a turntable has none).
-        pose_times: (views,) the views' times on the pose clock.
-        max_gap: the longest dropout interpolated across; None: none.
-
-    Raises:
-        RecordingError: naming the dropout, the views in it and the ways out.
-    """
-    rows = getattr(track, "rows", None)
-    for d in rows.dropouts if rows is not None else []:
-        inside = int(((pose_times > d.start) & (pose_times < d.end)).sum())
-        if inside and (max_gap is None or d.length > max_gap + 1e-9):
-            # the suggested value, rounded up to a millisecond, lets this dropout through
-            need = np.ceil(round(d.length * 1e3, 6)) / 1e3
-            raise RecordingError(
-                f"{track.source}: {inside} view(s) fall where the track has {d.describe()}; "
-                f"allow interpolation across it with --max-gap {need:g}, or keep the views "
-                "out of it with --start/--end")
-
-
-def _closes_loop(c2w: np.ndarray) -> bool:
-    """Whether the first and last views nearly coincide (a full turn of a turntable)."""
-    steps = np.linalg.norm(np.diff(c2w[:, :3, 3], axis=0), axis=1)
-    gap = np.linalg.norm(c2w[-1, :3, 3] - c2w[0, :3, 3])
-    cos = (np.trace(c2w[0, :3, :3].T @ c2w[-1, :3, :3]) - 1) / 2
-    turn = np.deg2rad(3 * 360 / len(c2w))  # three views' worth of a full turn
-    return bool(gap <= 2 * np.median(steps) + 1e-12 and cos > np.cos(turn))
-
-
 class _ColumnWriter:
     """One ``.npy`` file of a known length, filled chunk by chunk."""
 
@@ -360,7 +306,7 @@ def convert_recording(
         raise RecordingError(f"{source.path}: a calibration is needed (--calib) for the "
                              "camera's intrinsics")
     if calib.distorted:
-        _check_lens(calib, size)
+        check_lens(calib, size)
     estimate = None
     if options.clock_offset == "auto":
         from dataclasses import replace
@@ -390,12 +336,13 @@ def convert_recording(
                 f"{track.source}: the pose track does not cover the views' span "
                 f"{t0:.6f}..{t1:.6f} s (+ clock offset {options.clock_offset:g} s); "
                 "narrow --start/--end")
-        times = view_times(track, t0, t1, options)
+        times = view_times(track, t0, t1, options.views, options.spacing,
+                           options.clock_offset)
         check_dropouts(track, times + options.clock_offset, options.max_gap)
         c2w_rec = track.at(times + options.clock_offset)
         frame = fit_frame(c2w_rec, up=options.up, box=options.box)
         c2w = frame.poses_to_normalised(c2w_rec)
-        cyclic = _closes_loop(c2w) if options.cyclic is None else options.cyclic
+        cyclic = closes_loop(c2w) if options.cyclic is None else options.cyclic
         with atomic_dir(out) as tmp:
             split = tmp / "train"
             for sub in ("pose", "intrinsics", "events"):
@@ -417,37 +364,6 @@ def convert_recording(
                 doc["poses"]["clock_offset_estimate"] = estimate.to_json()
             (tmp / "scene.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
-
-
-def _check_lens(calib: Calibration, size: tuple[int, int]) -> None:
-    """Refuse a lens whose undistortion does not invert over the whole image (coefficients
-    far from any real lens), before anything is written."""
-    from hybridneus.data.lens import Lens
-    from hybridneus.errors import DatasetError
-
-    lens = Lens(calib.model, calib.coeffs, calib.layout_K(), *size)
-    try:
-        table = lens.table
-    except DatasetError:
-        table = None
-    if table is not None:
-        back = lens.project(table.reshape(-1, 2)).reshape(size[1], size[0], 2)
-        u, v = np.meshgrid(np.arange(size[0]) + 0.5, np.arange(size[1]) + 0.5)
-        err = float(np.abs(back - np.stack([u, v], -1)).max())
-    if table is None or not err < 0.01:
-        raise RecordingError(
-            f"{calib.source}: the {calib.model} lens {list(calib.coeffs)} does not invert over "
-            f"the {size[0]}x{size[1]} image (rays would be wrong); check the coefficients")
-    # the undistorted image's width against the pinhole's: a real lens stays within a few
-    # times (a 170-degree fisheye: about 8); coefficients in the wrong units or order do not
-    row = table[size[1] // 2, :, 0]
-    K = calib.layout_K()
-    ratio = float((row[-1] - row[0]) / ((size[0] - 1) / K[0, 0]))
-    if not 0.2 < ratio < 20.0:
-        raise RecordingError(
-            f"{calib.source}: the {calib.model} lens {list(calib.coeffs)} makes the image "
-            f"{ratio:.3g} times as wide as without it, far from any real lens (coefficients "
-            "in the wrong units or order?)")
 
 
 def _scene_json(source, track, calib, options, scan, times, frame: SceneFrame, cyclic,
