@@ -28,7 +28,12 @@ def convert(
         help="Calibration: Kalibr camchain YAML, OpenCV YAML/JSON, or plain JSON.")] = None,
     camera: Annotated[str | None, typer.Option(
         help="Camera of a Kalibr camchain or a DSEC cam_to_cam.yaml (default cam0).")] = None,
-    views: Annotated[int, typer.Option(help="Views placed along the track.")] = 1000,
+    views: Annotated[str, typer.Option(
+        help="Views placed along the track, or frames: one at each of the camera's own "
+             "frames (AEDAT4), which are kept as the rgb/ files.")] = "1000",
+    frames_eps: Annotated[float, typer.Option(
+        help="With --views frames: eps of the frames' log mapping log(c^2.2 + eps), "
+             "stated as the preset's tonemap_eps.")] = 1e-3,
     spacing: Annotated[str, typer.Option(
         help="time: views uniform in time; path: uniform in the camera's path length.")]
         = "time",
@@ -166,7 +171,7 @@ def convert(
         if np.any(box_values[1] - box_values[0] <= 0):
             raise RecordingError(f"--box: {box} has no volume")
     options = ConvertOptions(
-        views=views, spacing=spacing, start=start, end=end,
+        views=_views(views), spacing=spacing, start=start, end=end, frames_eps=frames_eps,
         clock_offset=_clock_offset(clock_offset),
         mosaic=mosaic, threshold=threshold,
         up=np.asarray(_floats("--up", up, 3)) if up else None, box=box_values, cyclic=cyclic,
@@ -187,7 +192,8 @@ def convert(
                    "estimated from the event rate and the camera's speed (coherence "
                    f"{est['coherence']:.2f}; {est['uncertainty_px']:.2f} px at the track's speed)")
     frame = doc["frame"]
-    typer.echo(f"{views} views ({spacing} spacing, cyclic {doc['preset']['cyclic']}); "
+    how = "at the camera's frames" if "frames" in doc else f"{spacing} spacing"
+    typer.echo(f"{doc['views']['n']} views ({how}, cyclic {doc['preset']['cyclic']}); "
                f"scale {frame['scale']:.4g} per metre; centre: {frame['how']}")
     from hybridneus.data import load_dataset
     from hybridneus.data.hull import background_fires
@@ -239,3 +245,14 @@ def _clock_offset(text: str) -> float | str:
     if not math.isfinite(value):
         raise RecordingError(f"--clock-offset: expected seconds or auto, got {text!r}")
     return value
+
+
+def _views(text: str) -> int | str:
+    from hybridneus.errors import RecordingError
+
+    if text.strip().lower() == "frames":
+        return "frames"
+    try:
+        return int(text)
+    except ValueError:
+        raise RecordingError(f"--views: expected a number or frames, got {text!r}") from None

@@ -23,8 +23,9 @@ from hybridneus.errors import RecordingError
 from hybridneus.fileio import atomic_dir
 from hybridneus.recordings.calibration import Calibration, check_lens
 from hybridneus.recordings.events import EventSource
-from hybridneus.recordings.frame import SceneFrame, box_crop, fit_frame
+from hybridneus.recordings.frame import fit_frame
 from hybridneus.recordings.poses import PoseTrack
+from hybridneus.recordings.scene_doc import scene_document
 from hybridneus.recordings.views import check_dropouts, closes_loop, view_times
 
 MOSAICS = ("mono", "RGGB", "BGGR", "GRBG", "GBRG")
@@ -36,7 +37,9 @@ class ConvertOptions:
     """How :func:`convert_recording` turns a recording into a dataset.
 
     Attributes:
-        views: number of views along the track.
+        views: number of views along the track, or ``"frames"``: one at each of the
+            recording's own frames (:mod:`hybridneus.recordings.frames`), which become the
+            split's ``rgb/`` files.
         spacing: ``time`` (uniform in time) or ``path`` (uniform in the camera's path length).
         start: event-clock seconds of the first view; earlier events are dropped (None: the
             first event inside the pose track).
@@ -50,6 +53,8 @@ class ConvertOptions:
         up: (3,) the recording frame's up direction, or None.
         box: (2, 3) corners of the region of interest in the recording frame, or None.
         cyclic: whether the track closes a loop; None: decided from the track.
+        frames_eps: with ``views="frames"``, the eps of the frames' log mapping
+            ``log(c ** 2.2 + eps)``, stated as the preset's ``tonemap_eps``.
         keep_hot_pixels: write the events of hot pixels too (:mod:`hybridneus.data.hot`);
             by default they are left out.
         max_gap: the longest dropout of the pose track (seconds without a sample) that views
@@ -57,7 +62,7 @@ class ConvertOptions:
             is refused.
     """
 
-    views: int = 1000
+    views: int | str = 1000
     spacing: str = "time"
     start: float | None = None
     end: float | None = None
@@ -69,11 +74,18 @@ class ConvertOptions:
     cyclic: bool | None = None
     max_gap: float | None = None
     keep_hot_pixels: bool = False
+    frames_eps: float = 1e-3
     sources: dict = field(default_factory=dict)
 
     def check(self) -> None:
-        if self.views < 2:
+        if isinstance(self.views, str):
+            if self.views != "frames":
+                raise RecordingError(f"--views: expected a number or frames, got "
+                                     f"{self.views!r}")
+        elif self.views < 2:
             raise RecordingError(f"--views: need at least 2, got {self.views}")
+        if not self.frames_eps > 0:
+            raise RecordingError(f"--frames-eps: must be > 0, got {self.frames_eps}")
         if self.spacing not in SPACINGS:
             raise RecordingError(f"--spacing: expected time or path, got {self.spacing!r}")
         if self.mosaic not in MOSAICS:
@@ -316,6 +328,15 @@ def convert_recording(
         estimate = estimate_clock_offset(source, track, float(calib.K[0, 0]))
         logging.getLogger("hybridneus").info(f"{track.source}: {estimate.line()}")
         options = replace(options, clock_offset=estimate.offset)
+    frames = None
+    if options.views == "frames":
+        from dataclasses import replace
+
+        from hybridneus.recordings.frames import frames_for_views, read_frames
+
+        frames = frames_for_views(read_frames(source.path, size), track, options.start,
+                                  options.end, options.clock_offset, source.path)
+        options = replace(options, views=len(frames), start=frames[0].t, end=frames[-1].t)
     with make_progress("events", disable=not progress) as bar:
         task = bar.add_task("scan", total=getattr(source, "n_events", None))
         scan = _scan(source, track, size, options,
@@ -336,8 +357,9 @@ def convert_recording(
                 f"{track.source}: the pose track does not cover the views' span "
                 f"{t0:.6f}..{t1:.6f} s (+ clock offset {options.clock_offset:g} s); "
                 "narrow --start/--end")
-        times = view_times(track, t0, t1, options.views, options.spacing,
-                           options.clock_offset)
+        times = (np.array([f.t for f in frames]) if frames is not None else
+                 view_times(track, t0, t1, options.views, options.spacing,
+                            options.clock_offset))
         check_dropouts(track, times + options.clock_offset, options.max_gap)
         c2w_rec = track.at(times + options.clock_offset)
         frame = fit_frame(c2w_rec, up=options.up, box=options.box)
@@ -358,55 +380,11 @@ def convert_recording(
                 name = f"r_{i:0{digits}d}.txt"
                 np.savetxt(split / "pose" / name, c2w[i].reshape(1, 16), fmt="%.10g")
                 np.savetxt(split / "intrinsics" / name, K4.reshape(1, 16), fmt="%.10g")
-            doc = _scene_json(source, track, calib, options, scan, times, frame, cyclic,
-                              n_pos, size)
-            if estimate is not None:
-                doc["poses"]["clock_offset_estimate"] = estimate.to_json()
+            if frames is not None:
+                from hybridneus.recordings.frames import write_frames
+
+                write_frames(frames, split / "rgb", digits)
+            doc = scene_document(source, track, calib, options, scan, times, frame, cyclic,
+                                 n_pos, size, estimate, frames)
             (tmp / "scene.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
-
-
-def _scene_json(source, track, calib, options, scan, times, frame: SceneFrame, cyclic,
-                n_pos, size) -> dict:
-    w, h = size
-    preset: dict = {
-        "group": "recording", "scene": Path(source.path).stem, "width": w, "height": h,
-        "cyclic": cyclic, "max_window": int(min(100, options.views - 1)),
-        "neg_ratio": 0.05, "mosaic": options.mosaic,
-    }
-    if options.threshold is not None:
-        preset["threshold"] = options.threshold
-    if options.box is not None:
-        preset |= box_crop(frame, options.box)
-    return {
-        "format": "hybridneus-converted-recording",
-        "version": 1,
-        "scene": preset["scene"],
-        "width": w,
-        "height": h,
-        "sensor": {"mosaic": options.mosaic, "threshold": options.threshold},
-        "frame": frame.to_json(),
-        "views": {
-            "n": options.views, "spacing": options.spacing,
-            "event_clock_s": [float(times[0]), float(times[-1])],
-            "time_unit": "view index: view i is at t = i",
-        },
-        "events": {
-            "source": str(source.path), "format": source.format, "read_as": source.note,
-            "n_read": scan.n_read, "n_in_window": scan.n_window,
-            "n_outside_pose_track": scan.n_outside_track, "n_written": scan.n_kept,
-            "hot_pixels": ({"n": scan.hot.n, "events": scan.hot.events,
-                            "pixels": [list(xy) for xy in scan.hot.pixels()]}
-                           if scan.hot is not None else {"n": 0, "events": 0, "pixels": []}),
-            "n_positive": n_pos, "start_s": options.start, "end_s": options.end,
-            "file_span_s": [scan.t_first_file, scan.t_last_file],
-        },
-        "poses": {"source": track.source, "n": len(track),
-                  "clock_offset_s": options.clock_offset, "max_gap_s": options.max_gap,
-                  **(track.rows.to_json() if getattr(track, "rows", None) else {})},
-        "calibration": calib.to_json() | {
-            "layout_K_note": "principal point + 0.5 px in the layout (pixel centres at +0.5)"},
-        **({"lens": {"model": calib.model, "coeffs": list(calib.coeffs)}}
-           if calib.distorted else {}),
-        "preset": preset,
-    }

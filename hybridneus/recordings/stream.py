@@ -20,7 +20,7 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
 #: Extra to install, by the module a reader imports.
 EXTRAS = {"faery": "faery", "h5py": "hdf5", "hdf5plugin": "hdf5", "rosbags": "rosbags",
-          "pycolmap": "colmap"}
+          "pycolmap": "colmap", "dv_processing": "recordings"}
 
 
 @dataclass

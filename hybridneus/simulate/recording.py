@@ -9,7 +9,8 @@ event's view-unit time onto them linearly gives the event stream a camera moving
 varying speed would fire: the same events, spread over the real time it spent between views.
 The pose track is the views' poses interpolated (``Slerp``, linear) at a tracker's sample
 times, shifted onto its own clock by ``clock_offset`` (``pose time = event time +
-clock_offset``).
+clock_offset``). A DAVIS's frames (:func:`aps_frames`) are the rendered views' light averaged
+over each exposure; :func:`write_aedat4` writes events and frames as iniVation's DV does.
 """
 
 from __future__ import annotations
@@ -98,4 +99,90 @@ def as_recording(events, c2w: np.ndarray, view_t: np.ndarray, *, t0: float = 0.0
                      pose_t=t0 + clock_offset + sample, quat=rot.as_quat(), position=pos)
 
 
-__all__ = ["Recording", "as_recording", "handheld_times"]
+def aps_frames(view_image, view_t: np.ndarray, fps: float, exposure: float, t0: float = 0.0,
+               samples: int = 8) -> list:
+    """A DAVIS's intensity frames of a re-timed split.
+
+    Args:
+        view_image: ``view_image(i)`` -> (height, width, 3) sRGB image of view ``i`` (floats
+            in [0, 1] or uint8), the split's ``rgb/`` frame.
+        view_t: (n_views,) seconds of the views, from 0 (:func:`handheld_times`).
+        fps: frames a second.
+        exposure: each frame's exposure, seconds: the light is averaged over ``samples``
+            instants of it, each between the two views around it (linear light), so a
+            moving camera blurs the frame.
+        t0: the event clock's reading at view 0.
+
+    Returns:
+        :class:`~hybridneus.recordings.frames.ApsFrame` list: linear 8-bit values (as the
+        sensor gives them), stamped at the middle of their exposure.
+    """
+    from hybridneus.recordings.frames import GAMMA, ApsFrame
+
+    cache: dict[int, np.ndarray] = {}
+
+    def linear(i: int) -> np.ndarray:
+        if i not in cache:
+            img = np.asarray(view_image(i))
+            img = img / 255.0 if img.dtype == np.uint8 else img.astype(np.float64)
+            cache[i] = np.clip(img, 0.0, 1.0) ** GAMMA
+        return cache[i]
+
+    n = view_t.shape[0]
+    frames = []
+    start = float(view_t[0])
+    while start + exposure <= view_t[-1]:
+        at = start + (np.arange(samples) + 0.5) / samples * exposure
+        s = np.interp(at, view_t, np.arange(n))
+        light = np.zeros_like(linear(0))
+        for v in s:
+            a = min(int(np.floor(v)), n - 2)
+            w = v - a
+            light += (1.0 - w) * linear(a) + w * linear(a + 1)
+        for key in [k for k in cache if k < int(np.floor(s[0]))]:
+            del cache[key]  # behind every later frame
+        image = np.round(255.0 * light / samples).astype(np.uint8)
+        frames.append(ApsFrame(t=t0 + start + 0.5 * exposure, image=image, exposure=exposure))
+        start += 1.0 / fps
+    return frames
+
+
+def write_aedat4(path, rec: Recording, frames: list, size: tuple[int, int]) -> None:
+    """Events (track 0) and frames (track 1) of a recording as an AEDAT4 file, written by
+    iniVation's dv-processing as DV writes a DAVIS346's (``pip install -e ".[recordings]"``).
+
+    Args:
+        path: the file.
+        rec: the events (seconds on the event clock).
+        frames: :class:`~hybridneus.recordings.frames.ApsFrame` list (may be empty).
+        size: (width, height) of the sensor.
+    """
+    from pathlib import Path
+
+    from hybridneus.recordings.stream import need
+
+    dv = need("dv_processing", Path(path), "writing AEDAT4 files")
+    config = dv.io.MonoCameraWriter.Config("DAVIS346")
+    config.addEventStream(tuple(size))
+    if frames:
+        config.addFrameStream(tuple(size))
+    writer = dv.io.MonoCameraWriter(str(path), config)
+    t = np.round(np.asarray(rec.t) * 1e6).astype(np.int64)
+    for a in range(0, t.size, 1 << 20):
+        store = dv.EventStore()
+        push = store.push_back
+        b = min(a + (1 << 20), t.size)
+        for args in zip(t[a:b].tolist(), np.asarray(rec.x[a:b]).tolist(),
+                        np.asarray(rec.y[a:b]).tolist(), (np.asarray(rec.p[a:b]) > 0).tolist(),
+                        strict=True):
+            push(*args)
+        writer.writeEvents(store)
+    for f in frames:
+        start = int(round((f.t - 0.5 * f.exposure) * 1e6))
+        bgr = np.ascontiguousarray(f.image[..., ::-1])  # DV stores OpenCV's channel order
+        writer.writeFrame(dv.Frame(start, int(round(f.exposure * 1e6)), 0, 0, bgr,
+                                   dv.FrameSource.SENSOR))
+    del writer  # closes the file
+
+
+__all__ = ["Recording", "aps_frames", "as_recording", "handheld_times", "write_aedat4"]

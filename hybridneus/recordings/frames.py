@@ -1,0 +1,135 @@
+"""The camera's own frames in a recording: a DAVIS's APS frames beside its events.
+
+A DAVIS346 records intensity frames (its active pixel sensor) into the same AEDAT4 file as
+its events, on the same clock. ``convert --views frames`` places one view at each frame (the
+middle of its exposure) and writes the frames as the split's ``rgb/`` files, so that the
+contrast threshold can be taken from them (``estimate.threshold``) and ``--check`` pictures
+can be compared with them. faery reads the frame track; DV stores colour frames already
+demosaiced.
+
+An APS pixel's value is linear in the light it gathered, while the layout's ``rgb/`` files are
+sRGB-encoded (the reader and the threshold estimate take ``c ** 2.2`` for the light), so the
+frames are written as ``255 (v / 255) ** (1 / 2.2)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hybridneus.errors import RecordingError
+from hybridneus.recordings.stream import first_line, need
+
+#: The gamma the layout's ``rgb/`` files are encoded with.
+GAMMA = 2.2
+
+
+@dataclass(frozen=True)
+class ApsFrame:
+    """One frame.
+
+    Attributes:
+        t: seconds on the event clock, the middle of the exposure.
+        image: (height, width, 3) uint8, linear in the light (as the sensor gives it).
+        exposure: the exposure's length, seconds.
+    """
+
+    t: float
+    image: np.ndarray
+    exposure: float
+
+
+def read_frames(path: str | Path, size: tuple[int, int]) -> list[ApsFrame]:
+    """The frames of the first frame track of an AEDAT4 file, in time order.
+
+    Args:
+        path: the recording.
+        size: (width, height) of the sensor; a frame of another size (a region of interest)
+            is refused.
+
+    Raises:
+        RecordingError: the file is not AEDAT4, holds no frame track or no frames, or a frame
+            does not cover the sensor.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".aedat4":
+        raise RecordingError(f"{path}: --views frames needs the camera's frames, which only "
+                             "AEDAT4 files (iniVation DV) hold here")
+    faery = need("faery", path, ".aedat4 files")
+    frames: list[ApsFrame] = []
+    try:
+        with faery.aedat.Decoder(path) as decoder:
+            tracks = [t for t in decoder.tracks() if t.data_type == "frame"]
+            if not tracks:
+                raise RecordingError(f"{path}: no frame track (tracks: "
+                                     f"{', '.join(t.data_type for t in decoder.tracks())})")
+            wanted = tracks[0].id
+            for track, packet in decoder:
+                if track.id == wanted:
+                    frames.append(_frame(packet, size, path))
+    except RecordingError:
+        raise
+    except Exception as exc:  # faery raises its own errors on a damaged file
+        raise RecordingError(f"{path}: reading its frames failed ({first_line(exc)})") from None
+    if not frames:
+        raise RecordingError(f"{path}: the frame track holds no frames")
+    frames.sort(key=lambda f: f.t)
+    return frames
+
+
+def _frame(packet, size: tuple[int, int], path: Path) -> ApsFrame:
+    pixels = np.asarray(packet.pixels)
+    if packet.format == "I;16":
+        pixels = (pixels >> 8).astype(np.uint8)
+    if pixels.ndim == 2:
+        pixels = np.repeat(pixels[..., None], 3, axis=2)
+    pixels = pixels[..., :3]
+    h, w = pixels.shape[:2]
+    if (w, h) != tuple(size) or packet.offset_x or packet.offset_y:
+        raise RecordingError(f"{path}: a frame covers {w}x{h} at ({packet.offset_x}, "
+                             f"{packet.offset_y}), not the {size[0]}x{size[1]} sensor")
+    start, end = packet.exposure_start_t, packet.exposure_end_t
+    mid = 0.5 * (start + end) if end > start else packet.t
+    return ApsFrame(t=float(mid) * 1e-6, image=np.ascontiguousarray(pixels, np.uint8),
+                    exposure=max(0.0, float(end - start) * 1e-6))
+
+
+def frames_for_views(frames: list[ApsFrame], track, start: float | None, end: float | None,
+                     clock_offset: float, path: Path) -> list[ApsFrame]:
+    """The frames a view can sit at: inside ``[start, end]`` (event clock; None: open) and
+    inside the pose track (at event time plus ``clock_offset``), one per time.
+
+    Raises:
+        RecordingError: fewer than two are left.
+    """
+    t = np.array([f.t for f in frames])
+    keep = track.covers(t + clock_offset) & np.r_[True, np.diff(t) > 0]
+    if start is not None:
+        keep &= t >= start
+    if end is not None:
+        keep &= t <= end
+    kept = [f for f, k in zip(frames, keep, strict=True) if k]
+    if len(kept) < 2:
+        raise RecordingError(f"{path}: {len(kept)} of its {len(t)} frames lie inside the pose "
+                             "track and --start/--end; --views frames needs at least 2")
+    return kept
+
+
+def write_frames(frames: list[ApsFrame], folder: Path, digits: int) -> None:
+    """The frames as the split's ``rgb/r_<i>.png`` files, sRGB-encoded."""
+    from PIL import Image
+
+    folder.mkdir()
+    for i, f in enumerate(frames):
+        Image.fromarray(encode_srgb(f.image)).save(folder / f"r_{i:0{digits}d}.png")
+
+
+def encode_srgb(image: np.ndarray) -> np.ndarray:
+    """(h, w, 3) uint8 linear values as the layout's sRGB-encoded ones."""
+    linear = image.astype(np.float64) / 255.0
+    return np.round(255.0 * linear ** (1.0 / GAMMA)).astype(np.uint8)
+
+
+__all__ = ["ApsFrame", "encode_srgb", "frames_for_views", "read_frames", "write_frames"]

@@ -1,0 +1,135 @@
+"""A DAVIS's own frames through ``convert --views frames``: views at the frames, the frames
+kept as ``rgb/``, and the contrast threshold taken from them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from hybridneus.data import load_dataset
+from hybridneus.errors import RecordingError
+
+THRESHOLD = (0.25, -0.15)  # C and polarity offset the scene is simulated with
+FPS, EXPOSURE = 10.0, 0.005
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    """A small scene simulated with unequal ON / OFF thresholds, re-timed as a 24-second
+    hand-held capture and written as DV writes a DAVIS346: events and 10 Hz frames in one
+    AEDAT4 file, a 200 Hz TUM track and a calibration."""
+    from hybridneus.simulate import EventModel, SimulationConfig, simulate_dataset
+    from hybridneus.simulate.recording import (
+        aps_frames,
+        as_recording,
+        handheld_times,
+        write_aedat4,
+    )
+
+    root = tmp_path_factory.mktemp("frames")
+    cfg = SimulationConfig(n_views=240, width=64, height=48, val_views=0, test_views=0,
+                           revolutions=2.0, supersample=1, spiral="even",
+                           events=EventModel(threshold=THRESHOLD[0],
+                                             polarity_offset=THRESHOLD[1], mosaic="mono"))
+    simulate_dataset("builtin:device", root / "sim", cfg, progress=False)
+    sp = load_dataset(root / "sim", splits="train")["train"]
+    times = handheld_times(sp.n_views, 24.0, 0, 0.3)
+    rec = as_recording(sp.events, sp.c2w, times, t0=100.0)
+    frames = aps_frames(lambda i: np.asarray(Image.open(sp.rgb_paths[i]).convert("RGB")),
+                        times, FPS, EXPOSURE, t0=100.0)
+    write_aedat4(root / "davis.aedat4", rec, frames, (sp.width, sp.height))
+    np.savetxt(root / "poses.txt", rec.tum_rows(), fmt="%.9f")
+    K = sp.intrinsics[0]
+    (root / "calib.json").write_text(json.dumps({
+        "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5,
+        "width": sp.width, "height": sp.height}))
+    return {"root": root, "rec": rec, "frames": frames, "split": sp}
+
+
+def _convert(capture, run_cli, out: Path, *extra: str):
+    root = capture["root"]
+    return run_cli("convert", str(root / "davis.aedat4"), str(out), "--poses",
+                   str(root / "poses.txt"), "--calib", str(root / "calib.json"), "--sensor",
+                   "mono", "-q", *extra)
+
+
+def test_views_sit_at_the_frames_which_become_the_rgb_files(capture, tmp_path, run_cli):
+    from hybridneus.recordings import read_pose_table, read_scene_frame
+    from hybridneus.recordings.frames import encode_srgb
+
+    code, text, err = _convert(capture, run_cli, tmp_path / "data", "--views", "frames")
+    assert code == 0, err
+    frames = capture["frames"]
+    assert f"{len(frames)} views (at the camera's frames" in text
+    doc = json.loads((tmp_path / "data" / "scene.json").read_text())
+    assert doc["frames"]["n"] == len(frames) and doc["preset"]["tonemap_eps"] == 1e-3
+    assert doc["frames"]["mean_exposure_s"] == pytest.approx(EXPOSURE)
+    sp = load_dataset(tmp_path / "data")["train"]
+    assert sp.n_views == len(frames) and len(sp.rgb_paths) == len(frames)
+    for k in (0, len(frames) // 2, len(frames) - 1):
+        kept = np.asarray(Image.open(sp.rgb_paths[k]).convert("RGB"))
+        np.testing.assert_array_equal(kept, encode_srgb(frames[k].image))
+    # each view's pose is the track's at the middle of its frame's exposure
+    track = read_pose_table(capture["root"] / "poses.txt")
+    truth = track.at(np.array([f.t for f in frames]))
+    frame = read_scene_frame(tmp_path / "data")
+    np.testing.assert_allclose(frame.to_recording(sp.c2w[:, :3, 3]), truth[:, :3, 3],
+                               atol=1e-6)
+    # events between the first and the last frame, none left out between
+    rec = capture["rec"]
+    inside = (rec.t >= frames[0].t) & (rec.t <= frames[-1].t)
+    assert len(sp.events) == int(inside.sum())
+
+
+def test_the_threshold_comes_from_the_kept_frames(capture, tmp_path, run_cli):
+    from hybridneus.data.threshold import estimate_thresholds
+
+    code, _, err = _convert(capture, run_cli, tmp_path / "data", "--views", "frames")
+    assert code == 0, err
+    ds = load_dataset(tmp_path / "data")
+    est, reason = estimate_thresholds(ds["train"], ds.preset)
+    assert est is not None, reason
+    c, o = THRESHOLD
+    assert est.threshold == pytest.approx(c, rel=0.1)
+    assert est.polarity_offset == pytest.approx(o, abs=0.05)
+
+
+def test_frames_are_refused_where_there_are_none(capture, tmp_path, run_cli):
+    from hybridneus.recordings.frames import read_frames
+    from hybridneus.simulate.recording import write_aedat4
+
+    write_aedat4(tmp_path / "events-only.aedat4", capture["rec"], [], (64, 48))
+    with pytest.raises(RecordingError, match="events-only.aedat4: no frame track"):
+        read_frames(tmp_path / "events-only.aedat4", (64, 48))
+    with pytest.raises(RecordingError, match="covers 64x48 at \\(0, 0\\), not the 32x24"):
+        read_frames(capture["root"] / "davis.aedat4", (32, 24))
+    np.savez(tmp_path / "e.npz", x=capture["rec"].x, y=capture["rec"].y,
+             t=np.round(capture["rec"].t * 1e6).astype(np.int64), p=capture["rec"].p)
+    root = capture["root"]
+    code, _, err = run_cli("convert", str(tmp_path / "e.npz"), str(tmp_path / "o"), "--poses",
+                           str(root / "poses.txt"), "--calib", str(root / "calib.json"),
+                           "--views", "frames", "-q")
+    assert code == 2 and "only AEDAT4 files (iniVation DV) hold here" in err
+    code, _, err = _convert(capture, run_cli, tmp_path / "o", "--views", "some")
+    assert code == 2 and "--views: expected a number or frames, got 'some'" in err
+
+
+def test_aps_frames_average_the_light_over_their_exposure():
+    from hybridneus.simulate.recording import aps_frames
+
+    dark, bright = np.zeros((2, 3, 3)), np.ones((2, 3, 3))
+    views = [dark, bright, dark]
+    times = np.array([0.0, 1.0, 2.0])
+    short = aps_frames(lambda i: views[i], times, fps=1.0, exposure=0.01)
+    assert [f.t for f in short] == pytest.approx([0.005, 1.005])
+    assert short[1].image.max() >= 252  # at the bright view
+    long = aps_frames(lambda i: views[i], times, fps=1.0, exposure=1.0)
+    assert len(long) == 2 and long[0].t == pytest.approx(0.5)
+    # over a ramp from dark to bright the light averages to a half: linear, not sRGB
+    assert long[0].image.mean() == pytest.approx(255 * 0.5, abs=2)
+    grey = aps_frames(lambda i: np.full((2, 3, 3), 0.5), times, fps=1.0, exposure=0.01)
+    assert grey[0].image.mean() == pytest.approx(255 * 0.5**2.2, abs=1)
