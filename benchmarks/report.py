@@ -662,6 +662,36 @@ def clock_section(rows: list[dict]) -> list[str]:
     return out + _command_lines(rows)
 
 
+def frames_section(rows: list[dict]) -> list[str]:
+    """bench_frames.py: the threshold taken from the frames a conversion kept."""
+    if not rows:
+        return []
+    out = ["## Camera frames: the threshold from the frames a conversion kept", "",
+           "Scenes simulated as a DAVIS346 at indoor light (`--noise davis346`: its ON / OFF "
+           "thresholds, mismatch, background activity, hot pixels, refractory period, "
+           "timestamp jitter), re-timed as a hand-held capture, with frames at the given rate "
+           "and exposure, written with the events into one AEDAT4 file as DV writes it, "
+           "converted with `hybridneus convert --views frames`, and the thresholds estimated "
+           "from the kept frames as `estimate.threshold` does; the frames stored with 8 or 16 "
+           "bits of linear light. Target: C within 10% of the truth. No fit.", "",
+           "| scene | seconds | frames (fps, exposure, bits) | true ON / OFF | estimated ON / OFF "
+           "| C error | explained | commit | date |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        t = r["true"]
+        if "estimated" in r:
+            e = r["estimated"]
+            est = f"{e['on']:.4f} / {e['off']:.4f}"
+            err, expl = f"{100 * r['threshold_error']:+.1f}%", f"{r['explained']:.2f}"
+        else:
+            est, err, expl = f"none: {r['refused']}", "-", "-"
+        out.append(f"| {r['scene']} | {r['duration_s']:g} | {r['frames']} ({r['fps']:g}, "
+                   f"{1e3 * r['exposure_s']:g} ms, {r.get('bits', 8)}) | {t['on']:.4f} / "
+                   f"{t['off']:.4f} | {est} | {err} | {expl} | {r['commit']} | "
+                   f"{r['date'][:10]} |")
+    return out + _command_lines(rows)
+
+
 def threshold_section(rows: list[dict]) -> list[str]:
     """bench_threshold.py: an unstated threshold taken from the frames."""
     if not rows:
@@ -817,6 +847,7 @@ def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple
     out += track_section(results.get("track", []))
     out += threshold_section(results.get("threshold", []))
     out += clock_section(results.get("clock", []))
+    out += frames_section(results.get("frames", []))
     out += budget_section(results.get("budget", []))
     out += busy_tests_section(results.get("busy_tests", []))
     out += reliability_section(results.get("reliability", []))

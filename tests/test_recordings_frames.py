@@ -126,10 +126,33 @@ def test_aps_frames_average_the_light_over_their_exposure():
     times = np.array([0.0, 1.0, 2.0])
     short = aps_frames(lambda i: views[i], times, fps=1.0, exposure=0.01)
     assert [f.t for f in short] == pytest.approx([0.005, 1.005])
-    assert short[1].image.max() >= 252  # at the bright view
+    assert short[1].image.max() >= 252 / 255  # at the bright view
     long = aps_frames(lambda i: views[i], times, fps=1.0, exposure=1.0)
     assert len(long) == 2 and long[0].t == pytest.approx(0.5)
     # over a ramp from dark to bright the light averages to a half: linear, not sRGB
-    assert long[0].image.mean() == pytest.approx(255 * 0.5, abs=2)
+    assert long[0].image.mean() == pytest.approx(0.5, abs=0.01)
     grey = aps_frames(lambda i: np.full((2, 3, 3), 0.5), times, fps=1.0, exposure=0.01)
-    assert grey[0].image.mean() == pytest.approx(255 * 0.5**2.2, abs=1)
+    assert grey[0].image.mean() == pytest.approx(0.5**2.2, abs=1 / 255)
+    deep = aps_frames(lambda i: np.full((2, 3, 3), 0.1), times, fps=1.0, exposure=0.01,
+                      bits=16)
+    assert deep[0].bits == 16 and deep[0].image.mean() == pytest.approx(0.1**2.2, abs=1e-5)
+    assert abs(grey[0].image.mean() * 255 - round(grey[0].image.mean() * 255)) < 1e-4
+
+
+def test_sixteen_bit_frames_keep_their_dark_end(capture, tmp_path):
+    from hybridneus.recordings.frames import read_frames
+    from hybridneus.simulate.recording import aps_frames, write_aedat4
+
+    sp = capture["split"]
+    times = np.linspace(0.0, 2.0, sp.n_views)
+    frames = aps_frames(lambda i: np.full((48, 64, 3), 0.1 + 0.0005 * i), times, 20.0, 0.01,
+                        t0=100.0, bits=16)
+    write_aedat4(tmp_path / "deep.aedat4", capture["rec"], frames, (64, 48))
+    back = read_frames(tmp_path / "deep.aedat4", (64, 48))
+    assert len(back) == len(frames) and all(f.bits == 16 for f in back)
+    for a, b in zip(frames, back, strict=True):
+        assert b.t == pytest.approx(a.t, abs=1e-6)
+        np.testing.assert_allclose(b.image, a.image, atol=1 / 65535)
+    # the dark end: 8 bits cannot tell these frames apart, 16 bits can
+    assert len({round(float(f.image.mean()) * 255) for f in back}) < len(back)
+    assert len({float(f.image.mean()) for f in back}) == len(back)

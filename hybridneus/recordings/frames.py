@@ -9,7 +9,9 @@ demosaiced.
 
 An APS pixel's value is linear in the light it gathered, while the layout's ``rgb/`` files are
 sRGB-encoded (the reader and the threshold estimate take ``c ** 2.2`` for the light), so the
-frames are written as ``255 (v / 255) ** (1 / 2.2)``.
+frames are written as ``255 v ** (1 / 2.2)`` for ``v`` the value over its format's full scale
+(8 or 16 bits). Frames of 8 bits hold the dark end coarsely (a step of one in 20 is a log
+change of 0.05, a third of a DAVIS threshold); the threshold estimate reads low from them.
 """
 
 from __future__ import annotations
@@ -32,13 +34,16 @@ class ApsFrame:
 
     Attributes:
         t: seconds on the event clock, the middle of the exposure.
-        image: (height, width, 3) uint8, linear in the light (as the sensor gives it).
+        image: (height, width, 3) float32 in [0, 1], linear in the light (the sensor's value
+            over its format's full scale).
         exposure: the exposure's length, seconds.
+        bits: the bits per value the frame was stored with (8 or 16).
     """
 
     t: float
     image: np.ndarray
     exposure: float
+    bits: int = 8
 
 
 def read_frames(path: str | Path, size: tuple[int, int]) -> list[ApsFrame]:
@@ -81,8 +86,7 @@ def read_frames(path: str | Path, size: tuple[int, int]) -> list[ApsFrame]:
 
 def _frame(packet, size: tuple[int, int], path: Path) -> ApsFrame:
     pixels = np.asarray(packet.pixels)
-    if packet.format == "I;16":
-        pixels = (pixels >> 8).astype(np.uint8)
+    bits = 16 if pixels.dtype == np.uint16 else 8
     if pixels.ndim == 2:
         pixels = np.repeat(pixels[..., None], 3, axis=2)
     pixels = pixels[..., :3]
@@ -92,8 +96,9 @@ def _frame(packet, size: tuple[int, int], path: Path) -> ApsFrame:
                              f"{packet.offset_y}), not the {size[0]}x{size[1]} sensor")
     start, end = packet.exposure_start_t, packet.exposure_end_t
     mid = 0.5 * (start + end) if end > start else packet.t
-    return ApsFrame(t=float(mid) * 1e-6, image=np.ascontiguousarray(pixels, np.uint8),
-                    exposure=max(0.0, float(end - start) * 1e-6))
+    image = (pixels.astype(np.float32) / float(2**bits - 1)).astype(np.float32)
+    return ApsFrame(t=float(mid) * 1e-6, image=image,
+                    exposure=max(0.0, float(end - start) * 1e-6), bits=bits)
 
 
 def frames_for_views(frames: list[ApsFrame], track, start: float | None, end: float | None,
@@ -127,9 +132,8 @@ def write_frames(frames: list[ApsFrame], folder: Path, digits: int) -> None:
 
 
 def encode_srgb(image: np.ndarray) -> np.ndarray:
-    """(h, w, 3) uint8 linear values as the layout's sRGB-encoded ones."""
-    linear = image.astype(np.float64) / 255.0
-    return np.round(255.0 * linear ** (1.0 / GAMMA)).astype(np.uint8)
+    """(h, w, 3) linear values in [0, 1] as the layout's sRGB-encoded uint8 ones."""
+    return np.round(255.0 * np.clip(image, 0.0, 1.0) ** (1.0 / GAMMA)).astype(np.uint8)
 
 
 __all__ = ["ApsFrame", "encode_srgb", "frames_for_views", "read_frames", "write_frames"]

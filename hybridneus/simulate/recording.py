@@ -100,7 +100,7 @@ def as_recording(events, c2w: np.ndarray, view_t: np.ndarray, *, t0: float = 0.0
 
 
 def aps_frames(view_image, view_t: np.ndarray, fps: float, exposure: float, t0: float = 0.0,
-               samples: int = 8) -> list:
+               samples: int = 8, bits: int = 8) -> list:
     """A DAVIS's intensity frames of a re-timed split.
 
     Args:
@@ -112,11 +112,14 @@ def aps_frames(view_image, view_t: np.ndarray, fps: float, exposure: float, t0: 
             instants of it, each between the two views around it (linear light), so a
             moving camera blurs the frame.
         t0: the event clock's reading at view 0.
+        bits: the values are quantised to this many bits (8 or 16), as stored.
 
     Returns:
-        :class:`~hybridneus.recordings.frames.ApsFrame` list: linear 8-bit values (as the
-        sensor gives them), stamped at the middle of their exposure.
+        :class:`~hybridneus.recordings.frames.ApsFrame` list: linear values (as the sensor
+        gives them), stamped at the middle of their exposure.
     """
+    if bits not in (8, 16):
+        raise ValueError(f"bits must be 8 or 16, got {bits}")
     from hybridneus.recordings.frames import GAMMA, ApsFrame
 
     cache: dict[int, np.ndarray] = {}
@@ -141,8 +144,10 @@ def aps_frames(view_image, view_t: np.ndarray, fps: float, exposure: float, t0: 
             light += (1.0 - w) * linear(a) + w * linear(a + 1)
         for key in [k for k in cache if k < int(np.floor(s[0]))]:
             del cache[key]  # behind every later frame
-        image = np.round(255.0 * light / samples).astype(np.uint8)
-        frames.append(ApsFrame(t=t0 + start + 0.5 * exposure, image=image, exposure=exposure))
+        top = float(2**bits - 1)
+        image = (np.round(top * light / samples) / top).astype(np.float32)
+        frames.append(ApsFrame(t=t0 + start + 0.5 * exposure, image=image, exposure=exposure,
+                               bits=bits))
         start += 1.0 / fps
     return frames
 
@@ -179,7 +184,9 @@ def write_aedat4(path, rec: Recording, frames: list, size: tuple[int, int]) -> N
         writer.writeEvents(store)
     for f in frames:
         start = int(round((f.t - 0.5 * f.exposure) * 1e6))
-        bgr = np.ascontiguousarray(f.image[..., ::-1])  # DV stores OpenCV's channel order
+        top, dtype = (65535.0, np.uint16) if f.bits == 16 else (255.0, np.uint8)
+        values = np.round(np.clip(f.image, 0.0, 1.0) * top).astype(dtype)
+        bgr = np.ascontiguousarray(values[..., ::-1])  # DV stores OpenCV's channel order
         writer.writeFrame(dv.Frame(start, int(round(f.exposure * 1e6)), 0, 0, bgr,
                                    dv.FrameSource.SENSOR))
     del writer  # closes the file
