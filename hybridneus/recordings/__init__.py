@@ -4,18 +4,23 @@
 
 - :func:`open_events` reads AEDAT4, Prophesee RAW/DAT, HDF5, ROS bags, text and numpy
   files in chunks;
-- :func:`read_pose_table` (TUM, CSV), :func:`read_colmap_track` (COLMAP models) and
+- :func:`read_pose_table` (TUM, CSV, ``rostopic echo -p``; hidden frames, repeated stamps
+  and dropouts reported), :func:`read_colmap_track` (COLMAP models) and
   :func:`read_turntable` give a camera track;
+- :func:`estimate_clock_offset` finds the offset between the event and pose clocks;
+- :func:`read_frames` reads a DAVIS's own frames from an AEDAT4 file;
 - :func:`read_calibration` reads Kalibr, OpenCV and plain calibration files;
 - :func:`fit_frame` chooses the unit-sphere frame and keeps the way back;
 - :func:`convert_recording` writes the EventNeRF layout with ``scene.json``.
 """
 
 from hybridneus.recordings.calibration import Calibration, read_calibration
+from hybridneus.recordings.clock import ClockEstimate, estimate_clock_offset
 from hybridneus.recordings.colmap import is_colmap_model, read_colmap_track
 from hybridneus.recordings.convert import ConvertOptions, convert_recording
 from hybridneus.recordings.events import EventChunk, EventSource, open_events
 from hybridneus.recordings.frame import SceneFrame, fit_frame, read_scene_frame
+from hybridneus.recordings.frames import ApsFrame, read_frames
 from hybridneus.recordings.pose_tables import read_pose_table
 from hybridneus.recordings.poses import (
     PoseTrack,
@@ -26,7 +31,9 @@ from hybridneus.recordings.poses import (
 )
 
 __all__ = [
+    "ApsFrame",
     "Calibration",
+    "ClockEstimate",
     "ConvertOptions",
     "EventChunk",
     "EventSource",
@@ -34,12 +41,14 @@ __all__ = [
     "SceneFrame",
     "Turntable",
     "convert_recording",
+    "estimate_clock_offset",
     "fit_frame",
     "is_colmap_model",
     "make_track",
     "open_events",
     "read_calibration",
     "read_colmap_track",
+    "read_frames",
     "read_matrix",
     "read_pose_table",
     "read_scene_frame",
