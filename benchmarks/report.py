@@ -47,9 +47,15 @@ def _budget(line: dict) -> str:
     return f"{budget}, meshed over the crop" if common.meshed_over_crop(line) else budget
 
 
+def _shown(command: str) -> str:
+    """A line's command as the docs show it: where the run appended its lines (``--out``)
+    is no part of what it measured."""
+    return re.sub(r" --out [^ ]+", "", command)
+
+
 def _command_lines(rows: list[dict]) -> list[str]:
     """A section's closing lines: every command that made its rows, once, in order."""
-    commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
+    commands = dict.fromkeys(f"Command: `{_shown(r['command'])}`" for r in rows)
     return ["", "  \n".join(commands), ""]
 
 
@@ -99,10 +105,10 @@ def _how(r: dict) -> str:
 
     compare_commits.py stamps each fit with the run_suite call it made for that one scene
     and seed; the comparison's own command is what reruns them all."""
-    command = r["command"].split(" (fits with the commit's ")[0]
+    command = _shown(r["command"].split(" (fits with the commit's ")[0])
     fitted = r.get("fit_command")
     if fitted and fitted != r["command"]:
-        return f"`{fitted}`, scored by `{command}`"
+        return f"`{_shown(fitted)}`, scored by `{command}`"
     return f"`{command}`"
 
 
@@ -763,7 +769,7 @@ def busy_tests_section(rows: list[dict]) -> list[str]:
             "|---|---|---|---|---|---|---|---|",
             f"| {r['hogs']} | {r['passed']} | {r['failed']} | {r['errors']} | "
             f"{r['wall_s']:.0f} | {r['commit']} | {_cpu(r)} | {r['date'][:10]} |", "",
-            f"Command: `{r['command']}`", ""]
+            f"Command: `{_shown(r['command'])}`", ""]
 
 
 def reliability_section(rows: list[dict]) -> list[str]:
@@ -780,7 +786,7 @@ def reliability_section(rows: list[dict]) -> list[str]:
             "| commit | machine | date |", "|---|---|---|---|---|---|---|---|---|---|---|",
             f"| {r['cases']} | {r['ok']} | {r['traceback']} | {r['silent']} | {r['unclear']} | "
             f"{r['leftover']} | {r['wrong']} | {r['seconds']:.0f} | {r['commit']} | {_cpu(r)} | "
-            f"{r['date'][:10]} |", "", f"Command: `{r['command']}`", ""]
+            f"{r['date'][:10]} |", "", f"Command: `{_shown(r['command'])}`", ""]
 
 
 def speed_section(results: dict[str, list[dict]]) -> list[str]:
@@ -797,7 +803,7 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             mode = "`--iters`" if r["mode"] == "iters" else "`--minutes` (probe included)"
             out.append(f"| {mode} | {r['dataset']} | {r['events']:,} | {r['first_step_s']:.2f} "
                        f"| {r['commit']} | {_cpu(r)} | {r['date'][:10]} |")
-        out += ["", f"Command: `{rows[-1]['command']}`", ""]
+        out += ["", f"Command: `{_shown(rows[-1]['command'])}`", ""]
     for bench, title in (("repeat", "Repeatability"), ("step", "One training step"),
                          ("launches", "Operations per step"),
                          ("grids", "Grid encoding"), ("mesh", "Mesh extraction"),
@@ -812,7 +818,7 @@ def speed_section(results: dict[str, list[dict]]) -> list[str]:
             last = rows[-1]
             rows = [r for r in rows if r["commit"] == last["commit"]
                     and (bench == "convert" or r["command"] == last["command"])]
-            commands = dict.fromkeys(f"Command: `{r['command']}`" for r in rows)
+            commands = dict.fromkeys(f"Command: `{_shown(r['command'])}`" for r in rows)
             commits = ", ".join(dict.fromkeys(r["commit"] for r in rows))
             out += [f"### {title}: {cpu}, commit {commits}, {last['date'][:10]}", "",
                     *_table(rows), "", "  \n".join(commands), ""]
