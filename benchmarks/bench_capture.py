@@ -14,7 +14,10 @@ fitted, and scored against the clean direct fit.
 3. ``hybridneus convert davis.aedat4 OUT --poses mocap.csv --calib calib.json --sensor RGGB
    --clock-offset auto``: no threshold, box or offset stated.
 4. Both datasets fitted with the same preset, seed and steps, meshed, and scored in the
-   original scene's frame with the paper's Chamfer protocol.
+   original scene's frame with the paper's Chamfer protocol. ``--fits`` adds, to find where a
+   gap comes from, ``noisy`` (the DAVIS346 simulation fitted directly, its preset stating the
+   true threshold) and ``told`` (the recording converted with the true offset and threshold
+   stated), or leaves fits out.
 
 One line per scene and seed to ``benchmarks/results/capture.jsonl``: the clock estimate
 against the truth, what the conversion reported, both Chamfers and their ratio. Target
@@ -27,9 +30,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import subprocess
 import sys
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import common
@@ -72,6 +77,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--variation", type=float, default=1.0)
     ap.add_argument("--offset", type=float, default=0.04, help="pose clock - event clock, s")
+    ap.add_argument("--fits", nargs="+", default=["clean", "converted"],
+                    choices=["clean", "converted", "noisy", "told"])
     common.add_arguments(ap, "capture")
     args = ap.parse_args()
     common.check_tree(args)
@@ -125,13 +132,17 @@ def main() -> None:
     (work / "calib.json").write_text(json.dumps({
         "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5,
         "width": sp.width, "height": sp.height}))
+
+    def convert(out: Path, *stated: str) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, "-m", "hybridneus.cli.app", "convert", str(work / "davis.aedat4"),
+             str(out), "--poses", str(work / "mocap.csv"), "--calib",
+             str(work / "calib.json"), "--sensor", "RGGB", "--quiet", *stated],
+            capture_output=True, text=True)
+
     converted = work / "data"
     t = time.perf_counter()
-    proc = subprocess.run(
-        [sys.executable, "-m", "hybridneus.cli.app", "convert", str(work / "davis.aedat4"),
-         str(converted), "--poses", str(work / "mocap.csv"), "--calib",
-         str(work / "calib.json"), "--sensor", "RGGB", "--clock-offset", "auto", "--quiet"],
-        capture_output=True, text=True)
+    proc = convert(converted, "--clock-offset", "auto")
     convert_s = round(time.perf_counter() - t, 1)
     line = {"bench": "capture", **common.stamp(args.threads), "scene": name,
             "preset": args.preset, "iters": args.iters, "seed": args.seed,
@@ -147,21 +158,29 @@ def main() -> None:
     line |= {"clock_error_ms": 1e3 * (est["offset_s"] - args.offset),
              "clock_sigma_ms": 1e3 * est["uncertainty_s"],
              "hot_pixels": doc["events"]["hot_pixels"]["n"]}
-    frame = read_scene_frame(converted)
+    told = work / "told"
+    if "told" in args.fits:
+        shutil.rmtree(told, ignore_errors=True)
+        proc = convert(told, "--clock-offset", repr(args.offset), "--threshold", repr(c))
+        if proc.returncode != 0:
+            raise SystemExit(f"[capture] {name}: convert (told) failed: {proc.stderr.strip()}")
 
-    def to_original(v: np.ndarray) -> np.ndarray:
-        return ((frame.to_recording(v) - SHIFT) @ R) / SCALE
+    def back_from(folder: Path):
+        frame = read_scene_frame(folder)
+        return lambda v: ((frame.to_recording(v) - SHIFT) @ R) / SCALE
 
+    runs = {"clean": (clean, None), "converted": (converted, back_from(converted)),
+            "noisy": (noisy, None), "told": (told, back_from(told) if told.exists() else None)}
     scores = {}
-    for label, (folder, back) in {"clean": (clean, None),
-                                  "converted": (converted, to_original)}.items():
+    for label in args.fits:
+        folder, back = runs[label]
         run_dir = fit(args, f"{name}-{label}", folder)
         scores[label] = score(args, run_dir, folder, back)
+        line[f"chamfer_{label}"] = scores[label]["chamfer"]
         print(f"[capture] {label}: CD {scores[label]['chamfer']}", file=sys.stderr, flush=True)
-    line |= {"chamfer_clean": scores["clean"]["chamfer"],
-             "chamfer_converted": scores["converted"]["chamfer"],
-             "ratio": round(scores["converted"]["chamfer"] / scores["clean"]["chamfer"], 3),
-             "fits": scores}
+    line["fits"] = scores
+    if {"clean", "converted"} <= set(scores):
+        line["ratio"] = round(scores["converted"]["chamfer"] / scores["clean"]["chamfer"], 3)
     common.append(args.out, line)
     print(json.dumps(line))
 

@@ -711,20 +711,22 @@ def capture_section(rows: list[dict]) -> list[str]:
            "scene with the same preset, seed and steps. Target: the converted fit within 1.25x "
            "of the clean one.", "",
            "| scene | seconds, spread | seed | steps | clock error (sigma), ms | hot pixels | "
-           "track rows dropped | CD clean | CD converted | ratio | commit | date |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "track rows dropped | CD clean | CD converted | ratio | CD noisy, direct | "
+           "CD converted, told offset and C | commit | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "refused" in r:
             out.append(f"| {r['scene']} | {r['duration_s']:g}, {r['variation']:g} | "
-                       f"{r['seed']} | - | refused: {r['refused']} | - | - | - | - | - | "
-                       f"{r['commit']} | {r['date'][:10]} |")
+                       f"{r['seed']} | - | refused: {r['refused']} | - | - | - | - | - | - | "
+                       f"- | {r['commit']} | {r['date'][:10]} |")
             continue
         t = r["track"]
         out.append(f"| {r['scene']} | {r['duration_s']:g}, {r['variation']:g} | {r['seed']} | "
                    f"{r['iters']} | {r['clock_error_ms']:+.1f} ({r['clock_sigma_ms']:.1f}) | "
                    f"{r['hot_pixels']} | {t['occluded']} + {t['repeated']} | "
-                   f"{_f(r['chamfer_clean'])} | {_f(r['chamfer_converted'])} | "
-                   f"{r['ratio']:.2f} | {r['commit']} | {r['date'][:10]} |")
+                   f"{_f(r.get('chamfer_clean'))} | {_f(r.get('chamfer_converted'))} | "
+                   f"{_f(r.get('ratio'), 2)} | {_f(r.get('chamfer_noisy'))} | "
+                   f"{_f(r.get('chamfer_told'))} | {r['commit']} | {r['date'][:10]} |")
     return out + _command_lines(rows)
 
 
