@@ -174,7 +174,12 @@ def main() -> None:
     scores = {}
     for label in args.fits:
         folder, back = runs[label]
-        run_dir = fit(args, f"{name}-{label}", folder)
+        try:
+            run_dir = fit(args, f"{name}-{label}", folder)
+        except subprocess.CalledProcessError as exc:  # the fit's own error is on stderr
+            line[f"failed_{label}"] = f"the fit failed (exit {exc.returncode})"
+            print(f"[capture] {label}: the fit failed", file=sys.stderr, flush=True)
+            continue
         scores[label] = score(args, run_dir, folder, back)
         line[f"chamfer_{label}"] = scores[label]["chamfer"]
         print(f"[capture] {label}: CD {scores[label]['chamfer']}", file=sys.stderr, flush=True)

@@ -698,6 +698,11 @@ def frames_section(rows: list[dict]) -> list[str]:
     return out + _command_lines(rows)
 
 
+def _fit_cell(r: dict, label: str) -> str:
+    """A capture line's Chamfer of one fit, or that it failed."""
+    return "failed" if f"failed_{label}" in r else _f(r.get(f"chamfer_{label}"))
+
+
 def capture_section(rows: list[dict]) -> list[str]:
     """bench_capture.py: a noisy recording with a messy track, converted and fitted."""
     if not rows:
@@ -725,8 +730,8 @@ def capture_section(rows: list[dict]) -> list[str]:
                    f"{r['iters']} | {r['clock_error_ms']:+.1f} ({r['clock_sigma_ms']:.1f}) | "
                    f"{r['hot_pixels']} | {t['occluded']} + {t['repeated']} | "
                    f"{_f(r.get('chamfer_clean'))} | {_f(r.get('chamfer_converted'))} | "
-                   f"{_f(r.get('ratio'), 2)} | {_f(r.get('chamfer_noisy'))} | "
-                   f"{_f(r.get('chamfer_told'))} | {r['commit']} | {r['date'][:10]} |")
+                   f"{_f(r.get('ratio'), 2)} | {_fit_cell(r, 'noisy')} | "
+                   f"{_fit_cell(r, 'told')} | {r['commit']} | {r['date'][:10]} |")
     return out + _command_lines(rows)
 
 
