@@ -88,13 +88,7 @@ def main() -> None:
 
     from hybridneus.data import load_dataset
     from hybridneus.recordings import read_scene_frame
-    from hybridneus.simulate import (
-        DAVIS346_THRESHOLD,
-        EventModel,
-        SimulationConfig,
-        davis346_noise,
-        simulate_dataset,
-    )
+    from hybridneus.simulate import DAVIS346_THRESHOLD
     from hybridneus.simulate.recording import as_recording, handheld_times, write_aedat4
 
     assets = run_suite.find_assets(args.assets)
@@ -102,15 +96,8 @@ def main() -> None:
     ns = SimpleNamespace(views=999, width=346, height=260, test_views=8, noise=(0.0, 0.0),
                          cache=args.cache, assets=args.assets)
     clean = run_suite.dataset_for(args.scene, assets, ns)
-    noisy = args.cache / f"{name}-999v-346x260-davis346"
-    c, o = DAVIS346_THRESHOLD
-    if not (noisy / "scene.json").is_file():
-        mesh, extra = run_suite.simulation_source(args.scene, assets)
-        print(f"[capture] simulating {noisy}", file=sys.stderr, flush=True)
-        simulate_dataset(mesh, noisy, SimulationConfig(
-            n_views=999, width=346, height=260, revolutions=8.0, val_views=0, test_views=0,
-            events=EventModel(threshold=c, polarity_offset=o),
-            noise=davis346_noise(args.duration / 998), seed=0, **extra))
+    noisy = run_suite.davis346_dataset(args.scene, assets, args.cache, args.duration)
+    c = DAVIS346_THRESHOLD[0]
     args.gt = clean / "gt_mesh.ply"
     sp = load_dataset(noisy, splits="train")["train"]
     work = args.cache / f"{name}-capture-s{args.seed}"
@@ -128,10 +115,7 @@ def main() -> None:
     views = np.linspace(rec.t[0], rec.t[-1], 1000) + args.offset
     lines, mess = messy_track(rec.tum_rows(), views, np.random.default_rng(args.seed))
     (work / "mocap.csv").write_text("\n".join(lines) + "\n")
-    K = sp.intrinsics[0]
-    (work / "calib.json").write_text(json.dumps({
-        "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5,
-        "width": sp.width, "height": sp.height}))
+    common.write_calibration(sp, work / "calib.json")
 
     def convert(out: Path, *stated: str) -> subprocess.CompletedProcess:
         return subprocess.run(

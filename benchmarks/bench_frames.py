@@ -22,7 +22,6 @@ the frames kept and the seconds each stage took. Target (issue: a real capture):
 from __future__ import annotations
 
 import argparse
-import json
 import subprocess
 import sys
 import time
@@ -55,13 +54,7 @@ def main() -> None:
 
     from hybridneus.data import load_dataset
     from hybridneus.data.threshold import estimate_thresholds
-    from hybridneus.simulate import (
-        DAVIS346_THRESHOLD,
-        EventModel,
-        SimulationConfig,
-        davis346_noise,
-        simulate_dataset,
-    )
+    from hybridneus.simulate import DAVIS346_THRESHOLD
     from hybridneus.simulate.recording import (
         aps_frames,
         as_recording,
@@ -70,20 +63,13 @@ def main() -> None:
     )
 
     assets = run_suite.find_assets(args.assets)
-    view_seconds = args.duration / 998
     c, o = DAVIS346_THRESHOLD
     for source in args.scenes:
         name = run_suite.scene_name(source)
-        folder = args.cache / f"{name}-999v-346x260-davis346"
         stages = {}
         t = time.perf_counter()
-        if not (folder / "scene.json").is_file():
-            mesh, extra = run_suite.simulation_source(source, assets)
-            print(f"[frames] simulating {folder}", file=sys.stderr, flush=True)
-            simulate_dataset(mesh, folder, SimulationConfig(
-                n_views=999, width=346, height=260, revolutions=8.0, val_views=0,
-                test_views=0, events=EventModel(threshold=c, polarity_offset=o),
-                noise=davis346_noise(view_seconds), seed=args.seed, **extra))
+        folder = run_suite.davis346_dataset(source, assets, args.cache, args.duration,
+                                            args.seed)
         stages["simulate_s"] = round(time.perf_counter() - t, 1)
         sp = load_dataset(folder, splits="train")["train"]
         for bits in args.bits:
@@ -101,10 +87,7 @@ def main() -> None:
                                 t0=1_650_000_000.0, bits=bits)
             write_aedat4(work / "davis.aedat4", rec, frames, (sp.width, sp.height))
             np.savetxt(work / "mocap.txt", rec.tum_rows(), fmt="%.9f")
-            K = sp.intrinsics[0]
-            (work / "calib.json").write_text(json.dumps({
-                "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5,
-                "width": sp.width, "height": sp.height}))
+            common.write_calibration(sp, work / "calib.json")
             stages["write_s"] = round(time.perf_counter() - t, 1)
             t = time.perf_counter()
             out = work / "data"

@@ -106,10 +106,7 @@ def write_recording(dataset: Path, out: Path) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     np.savetxt(out / "poses.txt", np.column_stack([tp, pos, rot.as_quat()]), fmt="%.15g",
                header="timestamp tx ty tz qx qy qz qw")
-    K = sp.intrinsics[0]
-    (out / "calib.json").write_text(json.dumps({
-        "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5,
-        "width": sp.width, "height": sp.height}))
+    common.write_calibration(sp, out / "calib.json")
     ev = sp.events
     t_us = np.round((T0 + ev.t * DT) * 1e6).astype(np.int64)
     base = int(t_us[0]) - 1000

@@ -14,7 +14,6 @@ prints the clutter warning. One event frame of each goes to ``docs/images/``.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import subprocess
 import sys
@@ -58,10 +57,7 @@ def main() -> None:
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     np.savetxt(work / "mocap.txt", rec.tum_rows(), fmt="%.9f")
-    K = sp.intrinsics[0]
-    (work / "calib.json").write_text(json.dumps({
-        "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5, "width": w,
-        "height": h}))
+    common.write_calibration(sp, work / "calib.json")
     cases = {"plain": (rec.t, rec.x, rec.y, rec.p)}
     merged = [np.concatenate([a, b]) for a, b in zip(
         cases["plain"], (back_t, *(np.concatenate([getattr(c, k) for c in chunks])

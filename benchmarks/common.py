@@ -197,3 +197,12 @@ def removed_settings(line: dict[str, Any]) -> list[tuple[str, str]]:
 
     pairs = (s.partition("=") for s in settings_of(line))
     return [(key, text) for key, _, text in pairs if key in REMOVED_KEYS]
+
+
+def write_calibration(split, path: Path) -> None:
+    """A plain-JSON calibration of ``split``'s first camera in OpenCV's pixel convention (the
+    layout's principal point less half a pixel), as a user would give ``convert --calib``."""
+    K = split.intrinsics[0]
+    path.write_text(json.dumps({
+        "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5,
+        "width": split.width, "height": split.height}))

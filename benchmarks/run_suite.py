@@ -129,6 +129,32 @@ def dataset_for(source: str, assets: dict[str, Path], args) -> Path:
     return folder
 
 
+def davis346_dataset(source: str, assets: dict[str, Path], cache: Path, duration: float,
+                     seed: int = 0) -> Path:
+    """Simulate (once) and return ``source`` as a DAVIS346 at indoor light would record it over
+    ``duration`` seconds (999 views, 346x260, its thresholds and ``davis346_noise``, whose
+    rates depend on the seconds a view takes); cached per duration and seed."""
+    from hybridneus.simulate import (
+        DAVIS346_THRESHOLD,
+        EventModel,
+        SimulationConfig,
+        davis346_noise,
+        simulate_dataset,
+    )
+
+    folder = cache / f"{scene_name(source)}-999v-346x260-davis346-{duration:g}s-seed{seed}"
+    if (folder / "scene.json").is_file():
+        return folder
+    mesh, extra = simulation_source(source, assets)
+    print(f"[suite] simulating {folder}", file=sys.stderr, flush=True)
+    c, o = DAVIS346_THRESHOLD
+    simulate_dataset(mesh, folder, SimulationConfig(
+        n_views=999, width=346, height=260, revolutions=8.0, val_views=0, test_views=0,
+        events=EventModel(threshold=c, polarity_offset=o),
+        noise=davis346_noise(duration / 998), seed=seed, **extra))
+    return folder
+
+
 def launch(args, name: str, dataset: Path, spec: str, seed: int) -> dict | None:
     """Fit (and unless ``--fit-only`` score) one run in a child process; append its line.
 
