@@ -198,7 +198,8 @@ def convert(
     from hybridneus.data import load_dataset
     from hybridneus.data.hull import background_fires
 
-    clutter = background_fires(load_dataset(out, splits="train")["train"])
+    written = load_dataset(out)  # a converted dataset holds only its train split
+    clutter = background_fires(written["train"])
     if clutter is not None:
         logging.getLogger("hybridneus").warning(
             f"{out}: {clutter}. A fit takes no crop from the events and leaves the hull "
@@ -211,7 +212,7 @@ def convert(
         if box_values is not None:
             pts += [[box_values[i, 0], box_values[j, 1], box_values[k, 2]]
                     for i in (0, 1) for j in (0, 1) for k in (0, 1)]
-        paths = write_check(load_dataset(out), np.asarray(pts, dtype=np.float64).reshape(-1, 3),
+        paths = write_check(written, np.asarray(pts, dtype=np.float64).reshape(-1, 3),
                             read_scene_frame(out), out / "check")
         typer.echo(f"{out / 'check'}: {len(paths)} pictures")
     typer.echo(f"wrote {out}")
