@@ -73,16 +73,15 @@ def dataset_report(ds, cfg) -> dict[str, Any]:
                            "splits": splits, "notes": list(ds.notes),
                            "frame": frame.to_json() if frame is not None else None}
     if cfg.data.split in ds.splits:
-        from hybridneus.data.hot import find_hot_pixels, pixel_counts
+        from hybridneus.data.hot import split_hot_pixels
 
-        sp = ds[cfg.data.split]
-        hot = find_hot_pixels(pixel_counts(sp.events.x, sp.events.y, sp.width, sp.height))
+        hot = split_hot_pixels(ds[cfg.data.split])
         out["hot_pixels"] = {"line": hot.line(), "pixels": [list(xy) for xy in hot.pixels()],
                              "events": hot.events}
         found = estimate_scene(ds, cfg.estimate, cfg.data, cfg.refine)
         noise, balance = found.noise, found.balance
         if balance is None:
-            noise, balance = noise_and_balance(ds[cfg.data.split])
+            noise, balance = noise_and_balance(found.dataset[cfg.data.split])
         out["fit"] = {
             "split": cfg.data.split,
             "noise": noise,
@@ -139,10 +138,10 @@ def _print(report: dict[str, Any]) -> None:
     if fit:
         say(f"noise: {fit['noise']}")
         say(report["hot_pixels"]["line"] + (
-            "; hybridneus convert leaves such pixels out" if report["hot_pixels"]["events"]
-            else ""))
+            "; a fit and convert leave such pixels out"
+            if report["hot_pixels"]["events"] else ""))
         for line in fit["findings"]:
-            if not line.startswith("events:"):  # the noise line, shown above
+            if not line.startswith(("events:", "hot pixels:")):  # shown above
                 say(f"fit: {line}")
         for line in fit["warnings"]:
             say(f"warning: {line}")

@@ -145,7 +145,7 @@ def prepare(
         preset_source=data.preset_source, preset=found.dataset.preset.to_dict(),
         estimated=found.taken, eps_start=found.eps_start, steps=cfg.train.iters,
         n_rays=rays_per_step(cfg, dev), device=str(dev), version=__version__,
-        pose_window=found.pose_window,
+        pose_window=found.pose_window, hot_pixels=[list(xy) for xy in found.hot_pixels],
     )
     trainer = Trainer(cfg, training_data(found.dataset, cfg, found.pose_window, dev), record,
                       dev)
@@ -252,6 +252,11 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
     path = dataset if dataset is not None else record.dataset
     _set_threads(cfg)
     data = load_dataset(path, overrides=record.preset_overrides(), splits=record.split)
+    if record.hot_pixels:
+        from hybridneus.data.estimate import with_split
+        from hybridneus.data.hot import without_pixels
+
+        data = with_split(data, without_pixels(data[record.split], record.hot_pixels))
     trainer = Trainer(cfg, training_data(data, cfg, record.pose_window, dev), record, dev)
     try:
         trainer.load_state_dict(state)

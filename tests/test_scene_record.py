@@ -86,3 +86,48 @@ def test_the_record_round_trips_and_bad_ones_are_run_errors(tmp_path):
     with pytest.raises(RunError, match="missing"):
         SceneRecord.load(tmp_path / "none.yaml")
     assert np.isfinite(back.steps)
+
+
+def test_a_fit_leaves_hot_pixels_out_and_a_resume_leaves_out_the_same(unstated, tmp_path,
+                                                                       monkeypatch):
+    import shutil
+
+    from hybridneus.data import load_dataset
+
+    root = tmp_path / "hot"
+    shutil.copytree(unstated, root)
+    events = root / "train" / "events" / "events.npz"
+    ev = load_dataset(root, splits="train")["train"].events
+    with np.load(events) as z:
+        stored = {k: z[k] for k in z.files}
+    n_hot, where = 400, (3, 5)
+    t_hot = np.linspace(0, float(ev.t_max), n_hot + 2)[1:-1]
+    t = np.concatenate([stored["t"], t_hot.astype(stored["t"].dtype)])
+    order = np.argsort(t, kind="stable")
+    extra = {"x": np.full(n_hot, where[0]), "y": np.full(n_hot, where[1]), "t": t_hot,
+             "p": np.full(n_hot, stored["p"].max())}
+    np.savez(events, **{k: np.concatenate([stored[k], extra[k].astype(stored[k].dtype)])[order]
+                        for k in ("x", "y", "t", "p")})
+
+    def events_at(trainer):
+        e = trainer.split.events
+        return int(np.count_nonzero((e.x == where[0]) & (e.y == where[1])))
+
+    first = fit(root, tiny("train.iters=2", "train.checkpoint_every=1"), out=tmp_path / "runs",
+                device="cpu")
+    record = SceneRecord.load(first.run_dir / "scene.yaml")
+    assert record.hot_pixels == [list(where)]
+    assert "1 hot pixels left out" in "\n".join(record.lines())
+    kept = prepare(root, tiny("train.iters=1", "estimate.hot_pixels=false"), device="cpu")[0]
+    assert events_at(kept) >= n_hot and kept.record.hot_pixels == []
+    left = prepare(root, tiny("train.iters=1"), device="cpu")[0]
+    assert events_at(left) == 0 and len(left.split.events) == len(kept.split.events) - \
+        events_at(kept)
+    assert left.split.t_max == kept.split.t_max  # the views stay where they were
+
+    def never(*args, **kwargs):
+        raise AssertionError("a resume must not estimate again")
+
+    monkeypatch.setattr("hybridneus.data.estimate.estimate_scene", never)
+    resumed, _ = prepare(None, None, ["train.iters=3"], resume=first.run_dir, device="cpu")
+    assert events_at(resumed) == 0

@@ -149,6 +149,7 @@ class EstimateConfig:
     (docs/data.md, "What a fit estimates from the events").
     """
 
+    hot_pixels: bool = True  # leave out pixels firing far above their neighbours (data.hot)
     crop: bool = True  # shrink the crop cylinder to the events' visual hull (no data.crop_*)
     threshold: bool = False  # C (and ON/OFF) the rgb/ frames imply, if no C is stated
     polarity_offset: bool = True  # the offset the events' balance implies, if none is stated

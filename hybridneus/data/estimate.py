@@ -11,6 +11,9 @@ split with its track smoothed (``refine.pose_smoothing``) and the free space of 
 visual hull (``priors.hull``). A resumed fit prepares the same from its ``scene.yaml``,
 estimating nothing again.
 
+- **Hot pixels** (:mod:`hybridneus.data.hot`): pixels firing far more than their neighbours
+  are left out of the training split before anything else is estimated (one hot pixel can
+  set the eps estimate, and its events ask for a brightness change no surface makes).
 - **Threshold** (:mod:`hybridneus.data.threshold`, off by default): the ON and OFF thresholds
   whose replay of the sensor over the split's ``rgb/`` frames fires the stream's events, when
   neither the path, ``scene.json`` nor the config states C, a tonemap eps is stated (the
@@ -64,6 +67,8 @@ class Estimates:
         balance: the :class:`~hybridneus.data.balance.PolarityBalance`, likewise.
         pose_window: the views the training track is to be smoothed over, chosen from the
             track (``refine.pose_smoothing=-1``; 0: too short to smooth), else ``None``.
+        hot_pixels: the ``(x, y)`` pixels left out of the training split (``dataset``'s
+            split is without them), loudest first.
     """
 
     dataset: EventDataset
@@ -74,6 +79,7 @@ class Estimates:
     noise: str | None = None
     balance: Any = None
     pose_window: int | None = None
+    hot_pixels: list[tuple[int, int]] = field(default_factory=list)
 
     def take(self, values: dict[str, Any], why: str) -> None:
         """Put ``values`` into the dataset's preset (on a copy) and record ``why``."""
@@ -110,6 +116,8 @@ def estimate_scene(
             f"{ev.path}: every event has polarity {'+1' if ev.n_positive else '-1'} (stored as "
             f"{ev.polarity_note}); a recording holds both, and a fit needs both (a polarity "
             "column of another convention, or a filtered file?)")
+    if cfg.hot_pixels:
+        split = _hot_pixels(found, split)
     from hybridneus.data.orientation import transposed_events
 
     transposed = transposed_events(split)
@@ -145,6 +153,27 @@ def noise_and_balance(split) -> tuple[str, Any]:
 
     filtered = denoised_split(split, NOISE_SLAB)
     return filtered[1].line(), polarity_balance(split, NOISE_SLAB, filtered)
+
+
+def _hot_pixels(found: Estimates, split) -> SplitData:
+    from hybridneus.data.hot import split_hot_pixels, without_pixels
+
+    hot = split_hot_pixels(split)
+    if not hot.n:
+        return split
+    found.hot_pixels = hot.pixels()
+    found.lines.append(f"{hot.line()}; left out of the fit (estimate.hot_pixels=false keeps "
+                       "them)")
+    split = without_pixels(split, found.hot_pixels)
+    found.dataset = with_split(found.dataset, split)
+    return split
+
+
+def with_split(dataset: EventDataset, split: SplitData) -> EventDataset:
+    """A shallow copy of ``dataset`` holding ``split`` in place of its namesake."""
+    out = copy.copy(dataset)
+    out.splits = {**dataset.splits, split.name: split}
+    return out
 
 
 def _threshold(found: Estimates, split, take_offset: bool) -> None:

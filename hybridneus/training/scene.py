@@ -55,6 +55,8 @@ class SceneRecord:
             them from the track (``refine.pose_smoothing=-1``; 0: too short to smooth),
             else ``None``.
         version: the hybridneus version that wrote the record.
+        hot_pixels: the ``[x, y]`` pixels whose events the fit left out
+            (``estimate.hot_pixels``); a resumed fit leaves out the same.
     """
 
     dataset: str
@@ -72,6 +74,7 @@ class SceneRecord:
     pose_window: int | None = None
     replans: int = 0
     paces: list[float] | None = None
+    hot_pixels: list[list[int]] = field(default_factory=list)
 
     def preset_overrides(self) -> dict[str, Any]:
         """The preset values to give the dataset reader so that it uses this record's."""
@@ -99,6 +102,8 @@ class SceneRecord:
             out.append(f"  training poses smoothed over {self.pose_window} views (chosen from "
                        "the track)" if self.pose_window else
                        "  training poses as given (the track is too short to smooth)")
+        if self.hot_pixels:
+            out.append(f"  {len(self.hot_pixels)} hot pixels left out")
         if self.stopped_at is not None:
             out.append(f"  stopped at step {self.stopped_at}: the time budget ran out")
         return out
