@@ -10,7 +10,7 @@ import pytest
 from hybridneus.config import DataConfig, EstimateConfig
 from hybridneus.data import load_dataset
 from hybridneus.data.estimate import estimate_scene
-from hybridneus.data.threshold import _log_frames, estimate_thresholds, replay_counts
+from hybridneus.data.threshold import RUN_VIEWS, _log_frames, estimate_thresholds, replay_counts
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +73,7 @@ def test_thresholds_come_back_where_a_pattern_changes_by_less_than_a_threshold(t
         assert est is not None, why
         assert est.on == pytest.approx(0.2, rel=0.05)
         assert est.off == pytest.approx(0.3, rel=0.05)
-        assert est.views == 200 and est.explained > 0.9
+        assert est.views == RUN_VIEWS and est.explained > 0.9
 
 
 def test_the_replay_fires_the_simulators_events_at_the_true_thresholds(tmp_path):
@@ -87,7 +87,7 @@ def test_the_replay_fires_the_simulators_events_at_the_true_thresholds(tmp_path)
     split = load_dataset(folder)["train"]
     preset = load_dataset(folder).preset
     pixels = np.arange(64 * 48)
-    frames, _ = _log_frames(split, preset, split.n_views, pixels)
+    frames, _ = _log_frames(split, preset, range(split.n_views), pixels)
     on = np.bincount((split.events.y * 64 + split.events.x)[split.events.p > 0], minlength=64 * 48)
     off = np.bincount((split.events.y * 64 + split.events.x)[split.events.p < 0], minlength=64 * 48)
     r_on, r_off = replay_counts(frames, 0.2, 0.3)
@@ -146,3 +146,21 @@ def test_a_fit_takes_the_frames_thresholds_only_where_nothing_states_c(unequal, 
     guessed = estimate_scene(load_dataset(copy), on)
     assert "threshold" not in guessed.taken
     assert any("guess, stated nowhere (no rgb/ frames)" in line for line in guessed.lines)
+
+
+def test_the_replay_runs_where_the_camera_moved_least():
+    from scipy.spatial.transform import Rotation
+
+    from hybridneus.data.threshold import slowest_run
+
+    n = 300
+    speed = np.ones(n - 1)
+    speed[180:240] = 0.2  # a slow stretch: views 180 .. 240
+    angle = np.concatenate([[0.0], np.cumsum(0.02 * speed)])
+    c2w = np.tile(np.eye(4), (n, 1, 1))
+    c2w[:, :3, :3] = Rotation.from_euler("y", angle[:, None]).as_matrix()
+    c2w[:, :3, 3] = 3.0 * np.stack([np.sin(angle), np.zeros(n), -np.cos(angle)], axis=1)
+    assert slowest_run(c2w, 60) == 180
+    assert slowest_run(c2w, 400) == 0  # shorter than the run: all of it
+    c2w[:, :3, 3] = c2w[0, :3, 3]  # turning on the spot moves the scene across the image too
+    assert slowest_run(c2w, 60) == 180

@@ -2,12 +2,12 @@
 
 Against a constant background, only the object fires events. For a view ``i``, the pixels that
 fired within ``window`` views of it outline the object's image (its silhouette edges move as
-the camera does); with sensor noise removed (:func:`without_noise`), their filled convex hull,
-grown by ``dilate`` pixels, contains the object's image. A point that projects inside the
-image but outside that hull in enough views is free space. The hull is conservative (convex
-per view, dilated, voted) and cannot see into concavities. It tightens the scene's crop
-cylinder (:func:`event_hull_crop`) and, during training, tells the field where there is no
-matter (:class:`FreeSpace`); it never cuts a mesh.
+the camera does); with sensor noise removed (:func:`hybridneus.data.firing.without_noise`),
+their filled convex hull, grown by ``dilate`` pixels, contains the object's image. A point
+that projects inside the image but outside that hull in enough views is free space. The hull
+is conservative (convex per view, dilated, voted) and cannot see into concavities. It
+tightens the scene's crop cylinder (:func:`event_hull_crop`) and, during training, tells the
+field where there is no matter (:class:`FreeSpace`); it never cuts a mesh.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from hybridneus.data.dataset import SplitData
+from hybridneus.data.firing import fired_near
 
 
 @dataclass
@@ -30,84 +31,8 @@ class EventHull:
     n_views: int
 
 
-#: Half the side, in RGGB cells (2x2 pixels), of the square in which :func:`without_noise`
-#: counts firing cells: 5x5 cells, 10x10 pixels.
-NOISE_RADIUS = 2
-#: The longest step, in cells, by which :func:`without_noise` joins firing cells to an outline.
-MAX_LINK = 8
 #: Why there is no hull, for the crop's and the ``hull`` term's log lines.
 NOTHING_OUTLINED = "the events outline nothing (no view fired, or all were too noisy)"
-
-
-def without_noise(
-    fired: np.ndarray, radius: int = NOISE_RADIUS, max_share: float = 0.35
-) -> np.ndarray | None:
-    """The firing pixels of one window that are not sensor noise, or ``None`` when there is
-    too much noise to tell.
-
-    Background activity and hot pixels fire at random places, alone; an object's outline
-    fires in connected strokes. The test runs on RGGB cells (2x2 pixels; a cell fires when
-    any of its pixels did), so that an edge seen by one colour channel only is as connected
-    as one seen by all. The density ``p`` of randomly firing cells is estimated from the
-    isolated ones (no other firing cell in the ``2 radius + 1`` square of cells), whose share
-    is ``p (1 - p)^n`` for ``n`` other cells in the square. A cell is kept when at least
-    ``k`` others of its square fired, ``k`` the smallest count that fewer than half a noise
-    cell in the whole image is expected to reach (a Poisson tail), and so is every firing
-    cell joined to a kept one by steps short enough that noise rarely chains (the sparse
-    stretches of an outline seen almost end-on). A pixel stays when it fired and its cell
-    stays. Without isolated cells nothing is removed. ``None`` when ``p`` is beyond what the
-    isolated cells can measure (``1 / (n + 1)``; the quietest quarter of an 8x8 grid of
-    image blocks fires that densely, or more cells are isolated than any ``p`` gives), or
-    when ``k`` exceeds ``max_share`` of ``n``: the outline cannot be told from the noise,
-    and the caller should skip the view.
-
-    Args:
-        fired: (height, width) bool, the pixels that fired in the window.
-        radius: half the side of the square, in cells.
-        max_share: the largest ``k`` accepted, as a share of ``n``.
-    """
-    import cv2
-
-    h, w = fired.shape
-    cells = np.zeros(((h + 1) // 2, (w + 1) // 2), bool)
-    for dy in (0, 1):
-        for dx in (0, 1):
-            sub = fired[dy::2, dx::2]
-            cells[: sub.shape[0], : sub.shape[1]] |= sub
-    side = 2 * radius + 1
-    n = side * side - 1
-    others = cv2.boxFilter(cells.astype(np.float32), -1, (side, side), normalize=False,
-                           borderType=cv2.BORDER_CONSTANT) - cells
-    # p (1 - p)^n peaks at p = 1 / (n + 1): dense noise leaves few isolated cells, or none,
-    # too. Noise fires everywhere alike, an object in a part of the image: the quietest
-    # quarter of an 8x8 grid of blocks tells the two apart
-    blocks = cv2.resize(cells.astype(np.float32), (8, 8), interpolation=cv2.INTER_AREA)
-    if np.percentile(blocks, 25) > 1.0 / (n + 1):
-        return None
-    isolated = float(np.count_nonzero(cells & (others < 0.5))) / cells.size
-    if isolated == 0.0:
-        return fired
-    if isolated > (n / (n + 1)) ** n / (n + 1):
-        return None
-    p = isolated
-    for _ in range(50):  # the fixed point of p = isolated / (1 - p)^n below that maximum
-        p = isolated / (1.0 - p) ** n
-    lam, expected = p * n, p * cells.size
-    term, tail, k = np.exp(-lam), 1.0, 0  # tail = P(X >= k), X ~ Poisson(lam)
-    while expected * tail >= 0.5:
-        tail -= term
-        k += 1
-        term *= lam / k
-        if k > max_share * n:
-            return None
-    core = cells & (others >= k - 0.5)
-    # 0.25 expected noise cells within a step: chains of noise die out quickly
-    link = int(np.clip((np.sqrt(0.25 / p) - 1.0) / 2.0, 1, MAX_LINK))
-    joined = cv2.dilate(cells.astype(np.uint8), np.ones((link, link), np.uint8))
-    _, labels = cv2.connectedComponents(joined, connectivity=8)
-    kept = cells & np.isin(labels, np.unique(labels[core]))
-    return fired & np.repeat(np.repeat(kept, 2, axis=0), 2, axis=1)[:h, :w]
-
 
 #: Views whose viewing directions lie within this many degrees of a view pool their firing
 #: pixels into its outline (:func:`event_silhouettes`).
@@ -126,12 +51,13 @@ def event_silhouettes(
 ) -> tuple[list[int], list[np.ndarray]]:
     """(view indices, boolean (height, width) masks) for every ``step``-th view: the filled
     convex hull of the pixels that fired within ``window`` views of it, less sensor noise
-    (:func:`without_noise`; ``denoise=False`` takes every pixel), pooled with those of the
-    neighbouring views whose viewing directions are within ``arc_deg`` degrees of its own
-    (at most ``MAX_ARC_VIEWS`` on either side; each window is denoised on its own), grown by
-    ``dilate`` pixels. Views with fewer than three firing pixels (nothing to outline) or too
-    much noise to tell the outline are skipped. Kept in ``split.events.cache``: the crop and
-    the ``hull`` term outline the same views (the masks are read-only).
+    (:func:`~hybridneus.data.firing.without_noise`; ``denoise=False`` takes every pixel),
+    pooled with those of the neighbouring views whose viewing directions are within
+    ``arc_deg`` degrees of its own (at most ``MAX_ARC_VIEWS`` on either side; each window is
+    denoised on its own), grown by ``dilate`` pixels. Views with fewer than three firing
+    pixels (nothing to outline) or too much noise to tell the outline are skipped. Kept in
+    ``split.events.cache``: the crop and the ``hull`` term outline the same views (the masks
+    are read-only).
 
     Pooling is for slow cameras: where a view moves a fraction of a degree (a turntable
     capture of 999 views turns 0.36 degrees per view), one window fires only a sparse
@@ -148,23 +74,6 @@ def event_silhouettes(
             mask.flags.writeable = False  # shared by every caller
         split.events.cache[key] = cached
     return list(cached[0]), list(cached[1])
-
-
-def fired_near(
-    split: SplitData, view: int, window: int = 1, denoise: bool = True
-) -> np.ndarray | None:
-    """(height, width) bool: the pixels that fired within ``window`` views of ``view``, less
-    sensor noise (:func:`without_noise`; ``denoise=False`` keeps every pixel). ``None`` when
-    the window is too noisy to tell the outline."""
-    from hybridneus.data.windows import event_counter
-
-    t, times = split.events.t, split.view_times
-    a = int(np.searchsorted(t, times[view - window], side="left"))
-    b = int(np.searchsorted(t, times[view + window], side="right"))
-    # the counter is shared with training's event frames
-    counts = event_counter(split).counts(a, b).sum(axis=1)
-    fired = counts.reshape(split.height, split.width) > 0
-    return without_noise(fired) if denoise else fired
 
 
 def _silhouettes(
