@@ -23,12 +23,12 @@ events as the stream holds over the same span (:func:`_solve`). Before the last 
 background activity (its rate at pixels whose brightness never changes by half a threshold) is
 taken off the totals, and hot pixels (far more events than their replay) are left out.
 
-Between two frames the replay can only take the brightness as linear in time, so every
-rise and fall that a frame interval hides goes uncounted: the replay fires too few events at
-a given threshold, and the solve takes C too low (by 12% on a hand-held capture of 20 frames
-a second, by 5% over its slowest stretch). So the replay runs over the :data:`RUN_VIEWS`
-consecutive frames over which the camera moved least (:func:`slowest_run`: its centre's path
-plus its turn times its distance from the scene's centre, the origin of a normalised dataset).
+Between two frames the replay can only take the brightness as linear in time, so every rise and
+fall that a frame interval hides goes uncounted: the replay fires too few events at a given
+threshold, and the solve takes C too low, the more so the faster the camera moves between
+frames. So the replay runs over the :data:`RUN_VIEWS` consecutive frames over which the camera
+moved least (:func:`slowest_run`: its centre's path plus its turn times its distance from the
+scene's centre, the origin of a normalised dataset).
 
 Frames that do not show the events' brightness (placeholders, another exposure, another
 camera) replay into per-pixel counts unlike the stream's; the share of the counts' variance
