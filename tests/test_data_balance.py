@@ -223,3 +223,28 @@ def test_over_an_open_path_the_balance_sets_no_offset_and_warns_of_none(lopsided
     published = tmp_path / "nerf" / "lego"  # a stated 0: no warning either
     shutil.copytree(opened, published)
     assert not _estimated(_config(), published).warnings
+
+
+def test_a_path_that_closes_after_its_first_views_gives_its_offset_over_the_loop(tmp_path):
+    from hybridneus.data.balance import closed_span
+    from hybridneus.simulate import EventModel, SimulationConfig, simulate_dataset
+
+    # a turn and a quarter: the cameras are back where they began after 60 of 75 views
+    root = tmp_path / "device"
+    simulate_dataset("builtin:device", root, SimulationConfig(
+        n_views=75, width=64, height=48, val_views=0, test_views=0, spiral="circle",
+        revolutions=1.25, supersample=1,
+        events=EventModel(threshold=0.1, polarity_offset=-0.4)))
+    scene = json.loads((root / "scene.json").read_text())
+    scene.pop("preset", None)
+    (root / "scene.json").write_text(json.dumps(scene))
+    found = _estimated(_config(), root)
+    first, last = closed_span(found.dataset["train"].c2w)
+    assert 60 <= last - first <= 63  # within 3 steps of where they began
+    assert found.dataset.preset.polarity_offset == pytest.approx(-0.4, abs=0.05)
+    assert "polarity_offset" in found.taken
+    assert any(f"over views {first} .. {last}" in line for line in found.lines)
+    assert closed_span(_orbit(100, 0.5)) is None  # half a turn never comes back
+    spiral = _orbit(100, 2.0)
+    spiral[:, 1, 3] = np.linspace(1.0, 0.0, 100)  # two turns that also come down
+    assert closed_span(spiral) is None

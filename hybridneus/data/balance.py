@@ -14,7 +14,10 @@ sum to no change: ``n+ (1 + o) = n- (1 - o)``, that is ``o = (n- - n+) / (n+ + n
 open path they need not: a spiral from the pole to the equator that sees a shaded surface
 turn away from its light fires mostly OFF events at every pixel of it (a simulated bowl with
 balanced polarities reads as -0.9), so a fit uses the estimate only where
-:func:`closed_path` says the cameras come back to their start. The estimate is
+:func:`closed_path` says the cameras come back to their start, or over the longest stretch
+of views whose cameras end where they began (:func:`closed_span`: a hand-held capture that
+comes down from above and then circles the object closes after its first views). The
+estimate is
 the median of that ratio over the pixels with at least ``MIN_EVENTS`` events, taken after the
 background-activity filter (:mod:`hybridneus.data.denoise`): balanced noise events would pull
 each pixel's ratio towards 0, and a hot pixel (one polarity, many events) is one pixel of
@@ -47,6 +50,8 @@ DISAGREE = 0.15
 #: A path is closed when its last camera centre is within this many of its typical steps
 #: between views from the first (a loop of N views ends one step from its start).
 CLOSED_STEPS = 3.0
+#: A closed stretch of a path (:func:`closed_span`) spans at least this share of its views.
+MIN_SPAN = 0.25
 
 
 @dataclass(frozen=True)
@@ -115,6 +120,53 @@ def closed_path(c2w: np.ndarray) -> tuple[bool, float]:
     if step <= 0.0:
         return gap <= 0.0, 0.0 if gap <= 0.0 else math.inf
     return gap <= CLOSED_STEPS * step, gap / step
+
+
+def closed_span(c2w: np.ndarray) -> tuple[int, int] | None:
+    """The longest stretch of views ``first .. last`` whose cameras end where they began.
+
+    The last camera must be within :data:`CLOSED_STEPS` median steps between views of the
+    first and look the same way (its viewing direction within as many median turns between
+    views): each pixel then sees the same brightness at both ends. Stretches shorter than
+    :data:`MIN_SPAN` of the views count for nothing.
+
+    Args:
+        c2w: (n_views, 4, 4) camera-to-world poses in capture order.
+
+    Returns:
+        ``(first, last)``, or ``None`` where no stretch closes.
+    """
+    from scipy.spatial import cKDTree
+
+    c2w = np.asarray(c2w, np.float64)
+    n = c2w.shape[0]
+    centres, forward = c2w[:, :3, 3], c2w[:, :3, 2]
+    forward = forward / np.linalg.norm(forward, axis=1, keepdims=True)
+    step = float(np.median(np.linalg.norm(np.diff(centres, axis=0), axis=1))) if n > 1 else 0.0
+    if step <= 0.0:
+        return None
+    turn = float(np.median(np.arccos(np.clip((forward[1:] * forward[:-1]).sum(1), -1, 1))))
+    cos_turn = math.cos(CLOSED_STEPS * turn + 1e-9)
+    shortest = max(2, math.ceil(MIN_SPAN * n))
+    best = None
+    near = cKDTree(centres).query_ball_point(centres, CLOSED_STEPS * step)
+    for i, js in enumerate(near):
+        js = np.asarray(js)
+        js = js[(js - i >= shortest) & (forward[js] @ forward[i] >= cos_turn)]
+        if js.size and (best is None or js.max() - i > best[1] - best[0]):
+            best = (i, int(js.max()))
+    return best
+
+
+def between_views(split: SplitData, first: int, last: int) -> SplitData:
+    """``split`` with only the events from view ``first`` to view ``last`` (its views stay)."""
+    ev = split.events
+    times = split.view_times
+    a = int(np.searchsorted(ev.t, times[first], side="left"))
+    b = int(np.searchsorted(ev.t, times[last], side="right"))
+    kept = EventStream(ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b], path=ev.path,
+                       polarity_note=ev.polarity_note, t_end=ev.t_max)
+    return replace(split, events=kept)
 
 
 def balance_offset(events: EventStream, width: int, height: int) -> PolarityBalance:

@@ -202,17 +202,21 @@ def _threshold(found: Estimates, split, take_offset: bool) -> None:
 
 
 def _polarity_offset(found: Estimates, split) -> None:
-    from hybridneus.data.balance import closed_path
+    from hybridneus.data.balance import between_views, closed_path, closed_span
 
-    noise, balance = noise_and_balance(split)
+    closed, gap = closed_path(split.c2w)
+    span = None if closed else closed_span(split.c2w)
+    counted = split if span is None else between_views(split, *span)
+    noise, balance = noise_and_balance(counted)
     found.noise, found.balance = noise, balance
-    found.lines += [noise, balance.line()]
+    where = "" if span is None else (f", over views {span[0]} .. {span[1]}, where the cameras "
+                                     "come back to where they were")
+    found.lines += [noise, balance.line() + where]
     suggested = balance.suggested()
     p = found.dataset.preset
     if suggested is None:
         return
-    closed, gap = closed_path(split.c2w)
-    if not closed:
+    if not closed and span is None:
         if suggested == p.polarity_offset:  # agrees anyway: nothing to explain
             return
         found.lines.append(
