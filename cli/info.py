@@ -75,10 +75,11 @@ def dataset_report(ds, cfg) -> dict[str, Any]:
     if cfg.data.split in ds.splits:
         from hybridneus.data.hot import split_hot_pixels
 
-        hot = split_hot_pixels(ds[cfg.data.split])
+        found = estimate_scene(ds, cfg.estimate, cfg.data, cfg.refine)
+        # the fit's own count of the split as given, unless estimate.hot_pixels is off
+        hot = found.hot if found.hot is not None else split_hot_pixels(ds[cfg.data.split])
         out["hot_pixels"] = {"line": hot.line(), "pixels": [list(xy) for xy in hot.pixels()],
                              "events": hot.events}
-        found = estimate_scene(ds, cfg.estimate, cfg.data, cfg.refine)
         noise, balance = found.noise, found.balance
         if balance is None:
             noise, balance = noise_and_balance(found.dataset[cfg.data.split])

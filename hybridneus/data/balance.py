@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hybridneus.data.dataset import SplitData
-from hybridneus.data.denoise import DenoiseReport, denoised_split
+from hybridneus.data.denoise import DenoiseReport, denoised_split, kept_events
 from hybridneus.data.events import EventStream
 
 #: Events per bincount call (bounds its int64 copy).
@@ -164,9 +164,7 @@ def between_views(split: SplitData, first: int, last: int) -> SplitData:
     times = split.view_times
     a = int(np.searchsorted(ev.t, times[first], side="left"))
     b = int(np.searchsorted(ev.t, times[last], side="right"))
-    kept = EventStream(ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b], path=ev.path,
-                       polarity_note=ev.polarity_note, t_end=ev.t_max)
-    return replace(split, events=kept)
+    return replace(split, events=kept_events(ev, slice(a, b)))
 
 
 def balance_offset(events: EventStream, width: int, height: int) -> PolarityBalance:

@@ -240,9 +240,9 @@ def denoised_split(split: SplitData, slab_views: float = 2.0) -> tuple[SplitData
     return dataclasses.replace(split, events=kept_events(ev, keep)), report
 
 
-def kept_events(events: EventStream, keep: np.ndarray) -> EventStream:
-    """The events where ``keep`` is True, as a stream whose views stay where the file put
-    them (``t_end``)."""
+def kept_events(events: EventStream, keep: np.ndarray | slice) -> EventStream:
+    """The events ``keep`` selects (a boolean mask or a slice), as a stream whose views stay
+    where the file put them (``t_end``)."""
     return EventStream(events.x[keep], events.y[keep], events.t[keep], events.p[keep],
                        path=events.path, polarity_note=events.polarity_note,
                        t_end=events.t_max)

@@ -67,8 +67,9 @@ class Estimates:
         balance: the :class:`~hybridneus.data.balance.PolarityBalance`, likewise.
         pose_window: the views the training track is to be smoothed over, chosen from the
             track (``refine.pose_smoothing=-1``; 0: too short to smooth), else ``None``.
-        hot_pixels: the ``(x, y)`` pixels left out of the training split (``dataset``'s
-            split is without them), loudest first.
+        hot: the :class:`~hybridneus.data.hot.HotPixels` of the training split as given,
+            when ``estimate.hot_pixels`` looked for them; those found are left out of
+            ``dataset``'s split.
     """
 
     dataset: EventDataset
@@ -79,7 +80,12 @@ class Estimates:
     noise: str | None = None
     balance: Any = None
     pose_window: int | None = None
-    hot_pixels: list[tuple[int, int]] = field(default_factory=list)
+    hot: Any = None
+
+    @property
+    def hot_pixels(self) -> list[tuple[int, int]]:
+        """The ``(x, y)`` pixels left out of the training split, loudest first."""
+        return self.hot.pixels() if self.hot is not None else []
 
     def take(self, values: dict[str, Any], why: str) -> None:
         """Put ``values`` into the dataset's preset (on a copy) and record ``why``."""
@@ -158,12 +164,11 @@ def noise_and_balance(split) -> tuple[str, Any]:
 def _hot_pixels(found: Estimates, split) -> SplitData:
     from hybridneus.data.hot import split_hot_pixels, without_pixels
 
-    hot = split_hot_pixels(split)
-    if not hot.n:
+    found.hot = split_hot_pixels(split)
+    if not found.hot.n:
         return split
-    found.hot_pixels = hot.pixels()
-    found.lines.append(f"{hot.line()}; left out of the fit (estimate.hot_pixels=false keeps "
-                       "them)")
+    found.lines.append(f"{found.hot.line()}; left out of the fit (estimate.hot_pixels=false "
+                       "keeps them)")
     split = without_pixels(split, found.hot_pixels)
     found.dataset = with_split(found.dataset, split)
     return split

@@ -109,7 +109,7 @@ def without_pixels(split, pixels: list) -> Any:
     """
     import dataclasses
 
-    from hybridneus.data.events import EventStream
+    from hybridneus.data.denoise import kept_events
 
     if not len(pixels):
         return split
@@ -117,10 +117,7 @@ def without_pixels(split, pixels: list) -> Any:
     mask = np.zeros((split.height, split.width), bool)
     xy = np.asarray(pixels, np.int64).reshape(-1, 2)
     mask[xy[:, 1], xy[:, 0]] = True
-    keep = ~mask[ev.y, ev.x]
-    events = EventStream(ev.x[keep], ev.y[keep], ev.t[keep], ev.p[keep], path=ev.path,
-                         polarity_note=ev.polarity_note, t_end=ev.t_max)
-    return dataclasses.replace(split, events=events)
+    return dataclasses.replace(split, events=kept_events(ev, ~mask[ev.y, ev.x]))
 
 
 __all__ = ["HotPixels", "MIN_EVENTS", "MIN_RATIO", "find_hot_pixels", "pixel_counts",
