@@ -85,6 +85,13 @@ def test_the_record_round_trips_and_bad_ones_are_run_errors(tmp_path):
         SceneRecord.load(tmp_path / "bad.yaml")
     with pytest.raises(RunError, match="missing"):
         SceneRecord.load(tmp_path / "none.yaml")
+    import dataclasses
+
+    for bad in ([[3]], [[1, -2]], [[400, 1]], "x"):
+        dataclasses.replace(record, preset=record.preset | {"width": 346, "height": 260},
+                            hot_pixels=bad).save(tmp_path / "hot.yaml")
+        with pytest.raises(RunError, match="hot.yaml: hot_pixels holds"):
+            SceneRecord.load(tmp_path / "hot.yaml")
     assert np.isfinite(back.steps)
 
 

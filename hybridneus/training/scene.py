@@ -143,7 +143,19 @@ class SceneRecord:
         missing = [k for k in PRESET_KEYS if k not in record.preset]
         if missing or not isinstance(record.steps, int) or record.steps < 1:
             raise RunError(f"{path}: incomplete scene record (missing {missing or 'steps'})")
+        _check_pixels(path, record)
         return record
+
+
+def _check_pixels(path: Path, record: SceneRecord) -> None:
+    """``hot_pixels`` must be ``[x, y]`` pairs inside the image (a resume masks them)."""
+    w, h = record.preset.get("width"), record.preset.get("height")
+    for xy in record.hot_pixels if isinstance(record.hot_pixels, list) else [None]:
+        pair = isinstance(xy, list) and len(xy) == 2 and all(
+            isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in xy)
+        if not pair or (isinstance(w, int) and xy[0] >= w) or (isinstance(h, int) and xy[1] >= h):
+            raise RunError(f"{path}: hot_pixels holds {xy!r}, not an [x, y] pixel of the "
+                           f"{w}x{h} image")
 
 
 def _how(line: str | None) -> str:
