@@ -28,6 +28,7 @@ def capture(tmp_path_factory):
         as_recording,
         handheld_times,
         write_aedat4,
+        write_hdf5,
     )
 
     root = tmp_path_factory.mktemp("frames")
@@ -42,6 +43,7 @@ def capture(tmp_path_factory):
     frames = aps_frames(lambda i: np.asarray(Image.open(sp.rgb_paths[i]).convert("RGB")),
                         times, FPS, EXPOSURE, t0=100.0)
     write_aedat4(root / "davis.aedat4", rec, frames, (sp.width, sp.height))
+    write_hdf5(root / "davis.h5", rec, frames, (sp.width, sp.height))
     np.savetxt(root / "poses.txt", rec.tum_rows(), fmt="%.9f")
     K = sp.intrinsics[0]
     (root / "calib.json").write_text(json.dumps({
@@ -50,24 +52,29 @@ def capture(tmp_path_factory):
     return {"root": root, "rec": rec, "frames": frames, "split": sp}
 
 
-def _convert(capture, run_cli, out: Path, *extra: str):
+def _convert(capture, run_cli, out: Path, *extra: str, recording: str = "davis.aedat4"):
     root = capture["root"]
-    return run_cli("convert", str(root / "davis.aedat4"), str(out), "--poses",
+    return run_cli("convert", str(root / recording), str(out), "--poses",
                    str(root / "poses.txt"), "--calib", str(root / "calib.json"), "--sensor",
                    "mono", "-q", *extra)
 
 
-def test_views_sit_at_the_frames_which_become_the_rgb_files(capture, tmp_path, run_cli):
+@pytest.mark.parametrize("recording", ["davis.aedat4", "davis.h5"])
+def test_views_sit_at_the_frames_which_become_the_rgb_files(capture, tmp_path, run_cli,
+                                                            recording):
     from hybridneus.recordings import read_pose_table, read_scene_frame
     from hybridneus.recordings.frames import encode_srgb
 
-    code, text, err = _convert(capture, run_cli, tmp_path / "data", "--views", "frames")
+    code, text, err = _convert(capture, run_cli, tmp_path / "data", "--views", "frames",
+                               recording=recording)
     assert code == 0, err
     frames = capture["frames"]
     assert f"{len(frames)} views (at the camera's frames" in text
     doc = json.loads((tmp_path / "data" / "scene.json").read_text())
     assert doc["frames"]["n"] == len(frames) and doc["preset"]["tonemap_eps"] == 1e-3
-    assert doc["frames"]["mean_exposure_s"] == pytest.approx(EXPOSURE)
+    # an HDF5 file carries no exposure times
+    exposure = EXPOSURE if recording.endswith("aedat4") else 0.0
+    assert doc["frames"]["mean_exposure_s"] == pytest.approx(exposure)
     sp = load_dataset(tmp_path / "data")["train"]
     assert sp.n_views == len(frames) and len(sp.rgb_paths) == len(frames)
     for k in (0, len(frames) // 2, len(frames) - 1):
@@ -85,10 +92,12 @@ def test_views_sit_at_the_frames_which_become_the_rgb_files(capture, tmp_path, r
     assert len(sp.events) == int(inside.sum())
 
 
-def test_the_threshold_comes_from_the_kept_frames(capture, tmp_path, run_cli):
+@pytest.mark.parametrize("recording", ["davis.aedat4", "davis.h5"])
+def test_the_threshold_comes_from_the_kept_frames(capture, tmp_path, run_cli, recording):
     from hybridneus.data.threshold import estimate_thresholds
 
-    code, _, err = _convert(capture, run_cli, tmp_path / "data", "--views", "frames")
+    code, _, err = _convert(capture, run_cli, tmp_path / "data", "--views", "frames",
+                            recording=recording)
     assert code == 0, err
     ds = load_dataset(tmp_path / "data")
     est, reason = estimate_thresholds(ds["train"], ds.preset)
@@ -100,20 +109,23 @@ def test_the_threshold_comes_from_the_kept_frames(capture, tmp_path, run_cli):
 
 def test_frames_are_refused_where_there_are_none(capture, tmp_path, run_cli):
     from hybridneus.recordings.frames import read_frames
-    from hybridneus.simulate.recording import write_aedat4
+    from hybridneus.simulate.recording import write_aedat4, write_hdf5
 
     write_aedat4(tmp_path / "events-only.aedat4", capture["rec"], [], (64, 48))
     with pytest.raises(RecordingError, match="events-only.aedat4: no frame track"):
         read_frames(tmp_path / "events-only.aedat4", (64, 48))
     with pytest.raises(RecordingError, match="covers 64x48 at \\(0, 0\\), not the 32x24"):
         read_frames(capture["root"] / "davis.aedat4", (32, 24))
+    write_hdf5(tmp_path / "events-only.h5", capture["rec"], [], (64, 48))
+    with pytest.raises(RecordingError, match="events-only.h5: no frames \\(expected images/"):
+        read_frames(tmp_path / "events-only.h5", (64, 48))
     np.savez(tmp_path / "e.npz", x=capture["rec"].x, y=capture["rec"].y,
              t=np.round(capture["rec"].t * 1e6).astype(np.int64), p=capture["rec"].p)
     root = capture["root"]
     code, _, err = run_cli("convert", str(tmp_path / "e.npz"), str(tmp_path / "o"), "--poses",
                            str(root / "poses.txt"), "--calib", str(root / "calib.json"),
                            "--views", "frames", "-q")
-    assert code == 2 and "only AEDAT4 files (iniVation DV) hold here" in err
+    assert code == 2 and "only AEDAT4 (iniVation DV) and HDF5 files hold here" in err
     code, _, err = _convert(capture, run_cli, tmp_path / "o", "--views", "some")
     assert code == 2 and "--views: expected a number or frames, got 'some'" in err
 
@@ -156,3 +168,28 @@ def test_sixteen_bit_frames_keep_their_dark_end(capture, tmp_path):
     # the dark end: 8 bits cannot tell these frames apart, 16 bits can
     assert len({round(float(f.image.mean()) * 255) for f in back}) < len(back)
     assert len({float(f.image.mean()) for f in back}) == len(back)
+
+
+def test_greyscale_hdf5_frames_on_a_microsecond_clock(tmp_path):
+    import h5py
+
+    from hybridneus.recordings.frames import read_frames
+
+    raw = np.arange(48 * 64, dtype=np.uint32).reshape(48, 64) % 251
+    with h5py.File(tmp_path / "grey.h5", "w") as f:
+        for i, stamp in enumerate([2_500_000, 1_000_000]):  # integer stamps, out of order
+            d = f.create_dataset(f"images/image{i:09d}", data=(raw + i).astype(np.uint8))
+            d.attrs["timestamp"] = np.int64(stamp)
+            d.attrs["type"] = "greyscale"
+        f.create_dataset("images/image000000002", data=raw.astype(np.uint8))
+    with pytest.raises(RecordingError, match="grey.h5: images/image000000002 has no timestamp"):
+        read_frames(tmp_path / "grey.h5", (64, 48))
+    with h5py.File(tmp_path / "grey.h5", "a") as f:
+        del f["images/image000000002"]
+    frames = read_frames(tmp_path / "grey.h5", (64, 48))
+    assert [f.t for f in frames] == pytest.approx([1.0, 2.5])
+    assert frames[0].image.shape == (48, 64, 3) and frames[0].bits == 8
+    # each pixel keeps its own value in every channel (a raw Bayer frame's pixel its colour's)
+    np.testing.assert_allclose(frames[0].image[..., 1], (raw + 1) / 255.0, atol=1e-6)
+    np.testing.assert_array_equal(frames[0].image[..., 0], frames[0].image[..., 2])
+    assert read_frames(tmp_path / "grey.h5", (64, 48), "ms")[1].t == pytest.approx(2500.0)

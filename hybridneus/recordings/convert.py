@@ -334,8 +334,9 @@ def convert_recording(
 
         from hybridneus.recordings.frames import frames_for_views, read_frames
 
-        frames = frames_for_views(read_frames(source.path, size), track, options.start,
-                                  options.end, options.clock_offset, source.path)
+        kept = read_frames(source.path, size, getattr(source, "time_unit", None))
+        frames = frames_for_views(kept, track, options.start, options.end,
+                                  options.clock_offset, source.path)
         options = replace(options, views=len(frames), start=frames[0].t, end=frames[-1].t)
     with make_progress("events", disable=not progress) as bar:
         task = bar.add_task("scan", total=getattr(source, "n_events", None))

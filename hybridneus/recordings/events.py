@@ -13,6 +13,7 @@ suffix                 format                                  reader (optional 
 ``.dat``               Prophesee DAT                           faery
 ``.es``                Event Stream                            faery
 ``.h5`` ``.hdf5``      DSEC / TUM-VIE: ``events/{x,y,t,p}``    h5py + hdf5plugin (``[hdf5]``)
+                       rosbag_to_h5: ``events/{xs,ys,ts,ps}``
 ``.txt`` ``.csv``      text columns (``t x y p`` by default)   numpy
 ``.npz`` ``.npy``      arrays ``x y t p`` or a structured one  numpy
 ``.bag``, ROS 2 folder ``dvs_msgs/EventArray`` (ROS 1 and 2)   rosbags (``[rosbags]``)
@@ -101,10 +102,24 @@ class FaerySource(EventSource):
 _H5_FAULTS = (OSError, KeyError, RuntimeError, ValueError, TypeError, IndexError)
 
 
+#: HDF5 event layouts: the arrays' names (t, x, y, p order) and what to call the layout.
+H5_LAYOUTS = (
+    (("t", "x", "y", "p"), "DSEC/TUM-VIE layout"),
+    (("ts", "xs", "ys", "ps"), "rosbag_to_h5 layout"),
+)
+
+
 class HDF5Source(EventSource):
-    """DSEC and TUM-VIE HDF5: ``events/{x, y, t, p}`` (or the same at the top level), ``t``
-    in microseconds plus an optional ``t_offset``; Blosc/Zstd filters come from hdf5plugin.
-    Prophesee's own HDF5 (``CD/events``, ECF codec) is refused with a pointer to its RAW file.
+    """HDF5 event files in two layouts, the arrays in an ``events`` group or at the top level:
+
+    - DSEC and TUM-VIE: ``x, y, t, p``, ``t`` in microseconds plus an optional ``t_offset``;
+    - the layout of events_contrast_maximization's ``rosbag_to_h5.py`` (event_cnn_minimal's
+      input; with the camera's frames as ``images/image<nnnnnnnnn>``, see
+      :mod:`hybridneus.recordings.frames`): ``xs, ys, ts, ps``, ``ts`` in seconds when it
+      holds floats, microseconds when integers; ``sensor_resolution`` (height, width).
+
+    Blosc/Zstd filters come from hdf5plugin. Prophesee's own HDF5 (``CD/events``, ECF codec)
+    is refused with a pointer to its RAW file.
     """
 
     def __init__(self, path: Path, time_unit: str | None = None) -> None:
@@ -130,23 +145,29 @@ class HDF5Source(EventSource):
                 "cannot decode; convert the camera's RAW file instead"
             )
         group = f["events"] if "events" in f and isinstance(f["events"], h5py.Group) else f
-        missing = [k for k in ("x", "y", "t", "p") if k not in group]
+        names, layout = next(((n, name) for n, name in H5_LAYOUTS if n[0] in group),
+                             H5_LAYOUTS[0])
+        missing = [k for k in names if k not in group]
         if missing:
             raise RecordingError(
                 f"{path}: no event arrays {'/'.join(missing)} (expected events/x, events/y, "
-                "events/t, events/p as in DSEC and TUM-VIE)"
+                "events/t, events/p as in DSEC and TUM-VIE, or events/xs, ys, ts, ps)"
             )
-        self._cols = [group[k] for k in ("t", "x", "y", "p")]
+        self._cols = [group[k] for k in names]
         n = {c.shape[0] for c in self._cols}
         if len(n) != 1:
             raise RecordingError(f"{path}: event arrays differ in length ({sorted(n)})")
         self.n_events = n.pop()
-        self.time_unit = time_unit or "us"
+        floats = self._cols[0].dtype.kind == "f"
+        self.time_unit = time_unit or ("s" if floats and names[0] == "ts" else "us")
         offset = f.get("t_offset")
         self._offset = int(offset[()]) if offset is not None else 0
-        self.format = "hdf5 (DSEC/TUM-VIE layout)"
+        self.format = f"hdf5 ({layout})"
         if "width" in f.attrs and "height" in f.attrs:
             self.size = (int(f.attrs["width"]), int(f.attrs["height"]))
+        elif "sensor_resolution" in f.attrs:
+            h, w = (int(v) for v in np.asarray(f.attrs["sensor_resolution"])[:2])
+            self.size = (w, h)
         self.note = (f"{self.format}, {self.n_events:,} events, t in {self.time_unit}"
                      + (f" + t_offset {self._offset}" if self._offset else ""))
 

@@ -7,6 +7,13 @@ contrast threshold can be taken from them (``estimate.threshold``) and ``--check
 can be compared with them. faery reads the frame track; DV stores colour frames already
 demosaiced.
 
+HDF5 files in the layout events_contrast_maximization's ``rosbag_to_h5.py`` writes hold the
+frames beside the events: ``images/image000000000``, ... (uint8 or uint16, greyscale
+or ``color_bgr`` as their ``type`` attribute says), each stamped by its ``timestamp``
+attribute on the events' clock and in their unit. A greyscale frame of a colour sensor (its
+raw Bayer values) serves as it is: each pixel keeps its own colour's value. These files carry
+no exposure time.
+
 An APS pixel's value is linear in the light it gathered, while the layout's ``rgb/`` files are
 sRGB-encoded (the reader and the threshold estimate take ``c ** 2.2`` for the light), so the
 frames are written as ``255 v ** (1 / 2.2)`` for ``v`` the value over its format's full scale
@@ -46,22 +53,68 @@ class ApsFrame:
     bits: int = 8
 
 
-def read_frames(path: str | Path, size: tuple[int, int]) -> list[ApsFrame]:
-    """The frames of the first frame track of an AEDAT4 file, in time order.
+def read_frames(path: str | Path, size: tuple[int, int], time_unit: str | None = None
+                ) -> list[ApsFrame]:
+    """The camera's frames in a recording, in time order: the first frame track of an AEDAT4
+    file, or the ``images`` group of an HDF5 file.
 
     Args:
         path: the recording.
         size: (width, height) of the sensor; a frame of another size (a region of interest)
             is refused.
+        time_unit: the unit of an HDF5 file's stamps (its events'); None: seconds where the
+            stamps are floats, else microseconds.
 
     Raises:
-        RecordingError: the file is not AEDAT4, holds no frame track or no frames, or a frame
-            does not cover the sensor.
+        RecordingError: the file holds no frames, or a frame does not cover the sensor.
     """
     path = Path(path)
-    if path.suffix.lower() != ".aedat4":
+    suffix = path.suffix.lower()
+    if suffix in (".h5", ".hdf5", ".hdf"):
+        frames = _hdf5_frames(path, size, time_unit)
+    elif suffix == ".aedat4":
+        frames = _aedat4_frames(path, size)
+    else:
         raise RecordingError(f"{path}: --views frames needs the camera's frames, which only "
-                             "AEDAT4 files (iniVation DV) hold here")
+                             "AEDAT4 (iniVation DV) and HDF5 files hold here")
+    frames.sort(key=lambda f: f.t)
+    return frames
+
+
+def _hdf5_frames(path: Path, size: tuple[int, int], time_unit: str | None) -> list[ApsFrame]:
+    from hybridneus.recordings.stream import TIME_UNITS
+
+    h5py = need("h5py", path, "HDF5 files")
+    need("hdf5plugin", path, "compressed HDF5 files")
+    frames = []
+    try:
+        with h5py.File(path, "r") as f:
+            group = f.get("images")
+            if not isinstance(group, h5py.Group) or not len(group):
+                raise RecordingError(f"{path}: no frames (expected images/image000000000, ... "
+                                     "with a timestamp attribute)")
+            for name in sorted(group):
+                dset = group[name]
+                if "timestamp" not in dset.attrs:
+                    raise RecordingError(f"{path}: images/{name} has no timestamp attribute")
+                stamp = np.asarray(dset.attrs["timestamp"]).reshape(-1)[0]
+                unit = time_unit or ("s" if stamp.dtype.kind == "f" else "us")
+                pixels = np.asarray(dset[()])
+                kind = dset.attrs.get("type", "")
+                if isinstance(kind, bytes):
+                    kind = kind.decode()
+                if pixels.ndim == 3 and kind == "color_bgr":
+                    pixels = pixels[..., ::-1]
+                frames.append(_as_frame(pixels, float(stamp) * TIME_UNITS[unit], 0.0, size,
+                                        path, (0, 0)))
+    except RecordingError:
+        raise
+    except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
+        raise RecordingError(f"{path}: reading its frames failed ({first_line(exc)})") from None
+    return frames
+
+
+def _aedat4_frames(path: Path, size: tuple[int, int]) -> list[ApsFrame]:
     faery = need("faery", path, ".aedat4 files")
     frames: list[ApsFrame] = []
     try:
@@ -80,25 +133,33 @@ def read_frames(path: str | Path, size: tuple[int, int]) -> list[ApsFrame]:
         raise RecordingError(f"{path}: reading its frames failed ({first_line(exc)})") from None
     if not frames:
         raise RecordingError(f"{path}: the frame track holds no frames")
-    frames.sort(key=lambda f: f.t)
     return frames
 
 
 def _frame(packet, size: tuple[int, int], path: Path) -> ApsFrame:
-    pixels = np.asarray(packet.pixels)
-    bits = 16 if pixels.dtype == np.uint16 else 8
-    if pixels.ndim == 2:
-        pixels = np.repeat(pixels[..., None], 3, axis=2)
-    pixels = pixels[..., :3]
-    h, w = pixels.shape[:2]
-    if (w, h) != tuple(size) or packet.offset_x or packet.offset_y:
-        raise RecordingError(f"{path}: a frame covers {w}x{h} at ({packet.offset_x}, "
-                             f"{packet.offset_y}), not the {size[0]}x{size[1]} sensor")
     start, end = packet.exposure_start_t, packet.exposure_end_t
     mid = 0.5 * (start + end) if end > start else packet.t
+    return _as_frame(np.asarray(packet.pixels), float(mid) * 1e-6,
+                     max(0.0, float(end - start) * 1e-6), size, path,
+                     (packet.offset_x, packet.offset_y))
+
+
+def _as_frame(pixels: np.ndarray, t: float, exposure: float, size: tuple[int, int],
+              path: Path, offset: tuple[int, int]) -> ApsFrame:
+    """A frame from its stored values: (h, w) or (h, w, channels) RGB, uint8 or uint16."""
+    if pixels.dtype not in (np.uint8, np.uint16):
+        raise RecordingError(f"{path}: a frame holds {pixels.dtype} values, expected 8 or "
+                             "16-bit unsigned")
+    bits = 16 if pixels.dtype == np.uint16 else 8
+    if pixels.ndim == 2 or pixels.shape[-1] == 1:
+        pixels = np.repeat(pixels.reshape(pixels.shape[:2] + (1,)), 3, axis=2)
+    pixels = pixels[..., :3]
+    h, w = pixels.shape[:2]
+    if (w, h) != tuple(size) or any(offset):
+        raise RecordingError(f"{path}: a frame covers {w}x{h} at ({offset[0]}, {offset[1]}), "
+                             f"not the {size[0]}x{size[1]} sensor")
     image = (pixels.astype(np.float32) / float(2**bits - 1)).astype(np.float32)
-    return ApsFrame(t=float(mid) * 1e-6, image=image,
-                    exposure=max(0.0, float(end - start) * 1e-6), bits=bits)
+    return ApsFrame(t=t, image=image, exposure=exposure, bits=bits)
 
 
 def frames_for_views(frames: list[ApsFrame], track, start: float | None, end: float | None,

@@ -10,7 +10,8 @@ varying speed would fire: the same events, spread over the real time it spent be
 The pose track is the views' poses interpolated (``Slerp``, linear) at a tracker's sample
 times, shifted onto its own clock by ``clock_offset`` (``pose time = event time +
 clock_offset``). A DAVIS's frames (:func:`aps_frames`) are the rendered views' light averaged
-over each exposure; :func:`write_aedat4` writes events and frames as iniVation's DV does.
+over each exposure; :func:`write_aedat4` writes events and frames as iniVation's DV does,
+:func:`write_hdf5` as events_contrast_maximization's ``rosbag_to_h5.py`` does.
 """
 
 from __future__ import annotations
@@ -192,4 +193,39 @@ def write_aedat4(path, rec: Recording, frames: list, size: tuple[int, int]) -> N
     del writer  # closes the file
 
 
-__all__ = ["Recording", "aps_frames", "as_recording", "handheld_times", "write_aedat4"]
+def write_hdf5(path, rec: Recording, frames: list, size: tuple[int, int]) -> None:
+    """Events and frames of a recording as an HDF5 file in the layout
+    events_contrast_maximization's ``rosbag_to_h5.py`` writes: ``events/{xs, ys, ts, ps}``
+    (``ts`` float seconds, ``ps`` 0 or 1), ``images/image<nnnnnnnnn>`` (``color_bgr``,
+    stamped by a ``timestamp`` attribute, no exposure) and the ``sensor_resolution``
+    (height, width) attribute.
+
+    Args:
+        path: the file.
+        rec: the events (seconds on the event clock).
+        frames: :class:`~hybridneus.recordings.frames.ApsFrame` list (may be empty).
+        size: (width, height) of the sensor.
+    """
+    from pathlib import Path
+
+    from hybridneus.recordings.stream import need
+
+    h5py = need("h5py", Path(path), "writing HDF5 files")
+    with h5py.File(path, "w") as f:
+        f.create_dataset("events/xs", data=np.asarray(rec.x, dtype=np.uint16))
+        f.create_dataset("events/ys", data=np.asarray(rec.y, dtype=np.uint16))
+        f.create_dataset("events/ts", data=np.asarray(rec.t, dtype=np.float64))
+        f.create_dataset("events/ps", data=(np.asarray(rec.p) > 0).astype(np.uint8))
+        for i, fr in enumerate(frames):
+            top, dtype = (65535.0, np.uint16) if fr.bits == 16 else (255.0, np.uint8)
+            values = np.round(np.clip(fr.image, 0.0, 1.0) * top).astype(dtype)
+            dset = f.create_dataset(f"images/image{i:09d}", data=values[..., ::-1])
+            dset.attrs["timestamp"] = float(fr.t)
+            dset.attrs["type"] = "color_bgr"
+        f.attrs["sensor_resolution"] = (int(size[1]), int(size[0]))
+        f.attrs["num_events"] = int(np.asarray(rec.t).size)
+        f.attrs["num_imgs"] = len(frames)
+
+
+__all__ = ["Recording", "aps_frames", "as_recording", "handheld_times", "write_aedat4",
+           "write_hdf5"]
