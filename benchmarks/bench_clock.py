@@ -39,6 +39,9 @@ def main() -> None:
                     default=["bunny", "toyTrain", "generated:device:161576974"])
     ap.add_argument("--assets", type=Path, default=common.REPO.parent / "shared" / "assets")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
+    ap.add_argument("--views", type=int, default=999,
+                    help="views simulated along the path (the events between two views are "
+                         "timed on a brightness interpolated linearly between them)")
     ap.add_argument("--durations", type=float, nargs="+", default=[30.0, 60.0])
     ap.add_argument("--variations", type=float, nargs="+", default=[0.5, 1.0, 0.0],
                     help="standard deviation of the log-speed (0: constant speed)")
@@ -66,7 +69,7 @@ def main() -> None:
             r = self.rec
             yield EventChunk(r.t, r.x.astype(np.int32), r.y.astype(np.int32), r.p > 0)
 
-    ns = SimpleNamespace(views=999, width=346, height=260, test_views=8, noise=(0.0, 0.0),
+    ns = SimpleNamespace(views=args.views, width=346, height=260, test_views=8, noise=(0.0, 0.0),
                          cache=args.cache, assets=args.assets)
     assets = run_suite.find_assets(args.assets)
     for scene in args.scenes:
@@ -82,7 +85,8 @@ def main() -> None:
                                        t0=1_650_000_000.0, clock_offset=offset)
                     track = make_track(rec.pose_t, rec.quat, rec.position, "track")
                     line = {"bench": "clock", **common.stamp(1), "scene": run_suite.scene_name(
-                        scene), "events": int(len(rec.t)), "duration_s": duration,
+                        scene), "views": args.views, "events": int(len(rec.t)),
+                            "duration_s": duration,
                             "variation": variation, "seed": seed, "offset_s": offset}
                     t0 = time.perf_counter()
                     try:

@@ -58,6 +58,28 @@ def test_the_offset_of_a_handheld_capture_is_found_within_its_stated_error(split
     assert "clock offset" in est.line() and est.shift_px > 0
 
 
+def test_an_epoch_clock_finds_the_offset_a_zero_clock_does(split):
+    """DV stamps host-epoch microseconds: the speed curve's 1 ms grid must not drift there
+    (an ``np.arange`` from 1.65e9 s steps 1e-4 off and put the offset 2 ms off a minute)."""
+    from hybridneus.recordings.clock import FINE, camera_speed
+    from hybridneus.simulate.recording import as_recording, handheld_times
+
+    times = handheld_times(split.n_views, DURATION, 0, 1.0)
+    found, curves = [], []
+    for t0 in (0.0, 1650000000.0):
+        rec = as_recording(split.events, split.c2w, times, t0=t0, clock_offset=0.04)
+        track = make_track(rec.pose_t, rec.quat, rec.position, "mocap.txt")
+        start, speed = camera_speed(track)
+        assert start == pytest.approx(t0 + 0.04, abs=1e-6)
+        curves.append(speed)
+        found.append(estimate_clock_offset(_Events(rec), track, 60.0).offset)
+    n = min(c.size for c in curves)  # the last sample may round either way
+    assert abs(curves[0].size - curves[1].size) <= 1 and n == pytest.approx(times[-1] / FINE,
+                                                                              abs=10)
+    np.testing.assert_allclose(curves[1][:n], curves[0][:n], rtol=1e-3)
+    assert found[1] == pytest.approx(found[0], abs=2e-5)
+
+
 def test_a_constant_speed_cannot_pin_an_offset_and_is_refused(split, tmp_path):
     rec = _recording(split, 0.0, 0, 0.04)
     track = make_track(rec.pose_t, rec.quat, rec.position, "turntable-mocap.txt")

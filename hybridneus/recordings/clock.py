@@ -116,9 +116,12 @@ def camera_speed(track: PoseTrack) -> tuple[float, np.ndarray]:
     turn = (track.rotation[:-1].inv() * track.rotation[1:]).magnitude()
     move = np.linalg.norm(np.diff(track.position, axis=0), axis=1)
     speed = (turn + move / max(distance, 1e-9)) / dt
-    mid = 0.5 * (track.t[:-1] + track.t[1:])
-    grid = np.arange(track.t[0], track.t[-1], FINE)
-    return float(grid[0]), gaussian_filter1d(np.interp(grid, mid, speed), SMOOTH)
+    # relative to the first sample: np.arange from an epoch time (1.7e9 s) steps by the
+    # difference of two rounded numbers, 1e-4 off FINE, and drifts by milliseconds a minute
+    rel = track.t - track.t[0]
+    mid = 0.5 * (rel[:-1] + rel[1:])
+    grid = np.arange(int(np.floor(rel[-1] / FINE)) + 1) * FINE
+    return float(track.t[0]), gaussian_filter1d(np.interp(grid, mid, speed), SMOOTH)
 
 
 def _log(x: np.ndarray) -> np.ndarray:
@@ -220,7 +223,6 @@ def _phase_delay(rate: np.ndarray, speed: np.ndarray, lag: int) -> tuple[float, 
     _, coh = coherence(x, y, nperseg=n)
     segments = max(1, 2 * x.size // n - 1)  # Welch's, half overlapping
     # a coherence estimated from few segments is biased up by about 1/segments: only what
-    # stands well above that counts
     # stands well above that counts, and only the band up from the lowest frequencies:
     # a high frequency that cleared the bar by chance would outweigh the rest (by f**2)
     good = coh > max(MIN_COHERENCE, 5.0 / segments)
