@@ -641,18 +641,27 @@ def clock_section(rows: list[dict]) -> list[str]:
            "(the camera's log-speed smooth random noise over 0.1 to 3 s with the given "
            "standard deviation; 0: a constant speed), a 200 Hz pose track on a clock ahead "
            "by a known offset, and the offset estimated as `convert --clock-offset auto` does "
-           "(`hybridneus.recordings.clock`). Per group of seeds: how many it answered, the "
+           "(`hybridneus.recordings.clock`). The simulator interpolates the brightness "
+           "linearly between views, so the views simulated along the path (999, or 3996: "
+           "four times as many) set how finely the events follow the camera's motion. Per "
+           "group of seeds, at the latest commit measured: how many it answered, the "
            "error of those (median and largest, ms), their median standard error, how many "
            "came within 2 ms, and the refusals. Targets: within 2 ms on hand-held tracks; "
            "refused at a constant speed. No fit.", "",
-           "| scene | seconds | speed variation | seeds | answered | error median (max), ms | "
-           "standard error, ms | within 2 ms | refused | commit | date |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "| scene | views | seconds | speed variation | seeds | answered | error median "
+           "(max), ms | standard error, ms | within 2 ms | refused | commit | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
-        groups.setdefault((r["scene"], r["duration_s"], r["variation"], r["commit"]),
-                          []).append(r)
-    for (scene, duration, variation, commit), rs in groups.items():
+        key = (r["scene"], r.get("views", 999), r["duration_s"], r["variation"])
+        if key in groups and groups[key][0]["commit"] != r["commit"]:
+            groups[key] = []  # a later commit's lines replace an earlier one's
+        groups.setdefault(key, []).append(r)
+    shown = []
+    for (scene, views, duration, variation), rs in sorted(groups.items(),
+                                                           key=lambda kv: kv[0][1]):
+        commit = rs[0]["commit"]
+        shown += rs
         answered = [r for r in rs if "error_ms" in r]
         errors = [abs(r["error_ms"]) for r in answered]
         err = f"{statistics.median(errors):.2f} ({max(errors):.2f})" if errors else "-"
@@ -662,10 +671,11 @@ def clock_section(rows: list[dict]) -> list[str]:
                           if "refused" in r})
         refused = (f"{len(rs) - len(answered)}: {'; '.join(reasons)}"
                    if len(answered) < len(rs) else "0")
-        out.append(f"| {scene} | {duration:g} | {variation:g} | {len(rs)} | {len(answered)} | "
+        out.append(f"| {scene} | {views} | {duration:g} | {variation:g} | {len(rs)} | "
+                   f"{len(answered)} | "
                    f"{err} | {sigma} | {sum(e <= 2.0 for e in errors)} | {refused} | "
                    f"{commit} | {rs[-1]['date'][:10]} |")
-    return out + _command_lines(rows)
+    return out + _command_lines(shown)
 
 
 def frames_section(rows: list[dict]) -> list[str]:
