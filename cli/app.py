@@ -32,6 +32,7 @@ _COMMANDS: list[tuple[str, str, str]] = [
     ("eval", "evaluate", "evaluate"),
     ("render", "render", "render"),
     ("demo", "demo", "demo"),
+    ("batch", "batch", "batch"),
 ]
 
 for _name, _module, _func in _COMMANDS:
