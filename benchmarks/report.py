@@ -713,6 +713,31 @@ def _fit_cell(r: dict, label: str) -> str:
     return "failed" if f"failed_{label}" in r else _f(r.get(f"chamfer_{label}"))
 
 
+def batch_section(rows: list[dict]) -> list[str]:
+    """bench_batch.py: N small fits as a shell loop and through ``hybridneus batch``."""
+    rows = [r for r in rows if not r.get("dirty")]
+    if not rows:
+        return []
+    out = ["## Batch throughput", "",
+           "The same small fits (one dataset, a seed each, fixed steps, no mesh) run alone on "
+           "the machine four ways: `hybridneus fit` in a shell loop with every core, and "
+           "`hybridneus batch` with `--workers 1` and `--workers 2` (one thread a fit) and with "
+           "`--executor ray` (one CPU a task). Wall time in all and against the loop; for the "
+           "batch, the engine's overhead per job: its wall time less the jobs' own (their "
+           "mean times the jobs over those at once), over the jobs.", "",
+           "| way | jobs | steps | dataset | wall, s | vs loop | job mean, s | overhead per "
+           "job, s | commit | machine | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        m = r.get("machine", {})
+        out.append(f"| {r['way']} | {r['jobs']} | {r['iters']} | {r['dataset']} | "
+                   f"{r['wall_s']:.0f} | {r.get('ratio_to_loop', 1.0):.2f} | "
+                   f"{r.get('job_mean_s', '-')} | {r.get('overhead_per_job_s', '-')} | "
+                   f"{r['commit']} | {m.get('cpu', '-')}, {m.get('cores', '-')} cores | "
+                   f"{r['date'][:10]} |")
+    return out + _command_lines(rows)
+
+
 def capture_section(rows: list[dict]) -> list[str]:
     """bench_capture.py: a noisy recording with a messy track, converted and fitted."""
     if not rows:
@@ -902,6 +927,7 @@ def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple
     out += clock_section(results.get("clock", []))
     out += frames_section(results.get("frames", []))
     out += capture_section(results.get("capture", []))
+    out += batch_section(results.get("batch", []))
     out += budget_section(results.get("budget", []))
     out += busy_tests_section(results.get("busy_tests", []))
     out += reliability_section(results.get("reliability", []))

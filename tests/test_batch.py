@@ -195,3 +195,40 @@ def test_a_missing_engine_names_its_extra(scans, tmp_path, monkeypatch):
         run_batch(jobs, tmp_path / "runs", engine, progress=False)
     with pytest.raises(ConfigError, match="--executor dask: expected one of local, ray, slurm"):
         make_executor("dask", tmp_path / "runs", 1, 1, {})
+
+
+def test_a_slurm_time_limit_checkpoints_the_fit_and_the_requeued_job_resumes(scans, tmp_path):
+    pytest.importorskip("submitit")
+    from hybridneus.batch import load_manifest
+    from hybridneus.batch.executors import SubmititJob
+
+    (job,) = load_manifest(_manifest(tmp_path, [{"name": "a", "data": str(scans / "device")}],
+                                     iters=400, mesh=False))
+    runs = tmp_path / "runs"
+    task = SubmititJob()
+    procs = []
+
+    def started(proc) -> None:  # what submitit's signal handler finds running
+        procs.append(proc)
+        task._proc = proc
+        _wait_for_file(runs / "a" / "fit", "*/checkpoints/last.pt")
+        time.sleep(1.0)
+        requeued.append(task.checkpoint(job.to_dict(), str(runs), 1))
+
+    requeued: list = []
+    from hybridneus.batch.executors import outcome
+
+    status, _ = outcome(job.to_dict(), str(runs), 1, started)
+    assert status == "interrupted" and procs[0].returncode == 130
+    assert len(requeued) == 1 and requeued[0].function.__class__ is SubmititJob
+    status, record = requeued[0].function(*requeued[0].args)
+    assert status == "done" and record["steps"] == 400
+    assert "--resume" in _fits(runs / "a")[-1]
+
+
+def _wait_for_file(folder: Path, pattern: str, timeout: float = 300.0) -> None:
+    end = time.monotonic() + timeout
+    while not any(folder.glob(pattern)):
+        if time.monotonic() > end:
+            raise AssertionError(f"{folder}: no {pattern} in {timeout} s")
+        time.sleep(0.2)
