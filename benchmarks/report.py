@@ -728,6 +728,8 @@ def batch_section(rows: list[dict]) -> list[str]:
            "| way | jobs | steps | dataset | wall, s | vs loop | job mean, s | overhead per "
            "job, s | commit | machine | date |",
            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    killed = [r for r in rows if r["way"] == "killed"]
+    rows = [r for r in rows if r["way"] != "killed"]
     for r in rows:
         m = r.get("machine", {})
         out.append(f"| {r['way']} | {r['jobs']} | {r['iters']} | {r['dataset']} | "
@@ -735,7 +737,14 @@ def batch_section(rows: list[dict]) -> list[str]:
                    f"{r.get('job_mean_s', '-')} | {r.get('overhead_per_job_s', '-')} | "
                    f"{r['commit']} | {m.get('cpu', '-')}, {m.get('cores', '-')} cores | "
                    f"{r['date'][:10]} |")
-    return out + _command_lines(rows)
+    for r in killed:
+        out += ["", f"Killed mid-way (`local-2`, SIGKILL to the batch's process group after "
+                f"{r['done_before_kill']} of {r['jobs']} jobs were done) and run again: "
+                f"{'every job done' if r['all_done'] else 'NOT every job done'}, "
+                f"{'one fit run each' if r['one_run_each'] else 'some jobs with two runs'}, "
+                f"{r['resumed']} resumed from a checkpoint, {r['rerun_from_start']} started "
+                f"over ({r['wall_s']:.0f} s in all; {r['commit']}, {r['date'][:10]})."]
+    return out + _command_lines(rows + killed)
 
 
 def capture_section(rows: list[dict]) -> list[str]:
