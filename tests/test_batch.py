@@ -232,3 +232,34 @@ def _wait_for_file(folder: Path, pattern: str, timeout: float = 300.0) -> None:
         if time.monotonic() > end:
             raise AssertionError(f"{folder}: no {pattern} in {timeout} s")
         time.sleep(0.2)
+
+
+def test_each_running_job_gets_a_gpu_of_its_own(monkeypatch, tmp_path):
+    import threading
+
+    import hybridneus.batch.executors as executors
+    from hybridneus.batch.manifest import JobSpec
+
+    holding: dict[str, str] = {}
+    clash = []
+    lock = threading.Lock()
+
+    def job(spec, runs, threads, started=None, env=None):
+        gpu = env["CUDA_VISIBLE_DEVICES"]
+        with lock:
+            clash.extend(g for g in holding.values() if g == gpu)
+            holding[spec["id"]] = gpu
+        time.sleep(0.1)
+        with lock:
+            del holding[spec["id"]]
+        return "done", {"gpu": gpu}
+
+    monkeypatch.setattr(executors, "outcome", job)
+    ended = {}
+    executors.LocalExecutor(tmp_path, 2, 1, gpus=2).run(
+        [JobSpec(id=f"j{i}", data="d") for i in range(6)],
+        lambda i, event, value: ended.setdefault(i, value) if event == "done" else None)
+    assert not clash and len(ended) == 6
+    assert {v["gpu"] for v in ended.values()} == {"0", "1"}
+    # more workers than GPUs: the GPUs are left to the fits' own choice
+    assert executors.LocalExecutor(tmp_path, 3, 1, gpus=2).gpus == 0

@@ -31,12 +31,12 @@ def _first_line(exc: BaseException) -> str:
     return (text.splitlines()[0] if text else type(exc).__name__)[:300]
 
 
-def outcome(spec: dict, runs: str, threads: int,
-            started: Callable | None = None) -> tuple[str, Any]:
+def outcome(spec: dict, runs: str, threads: int, started: Callable | None = None,
+            env: dict[str, str] | None = None) -> tuple[str, Any]:
     """``("done", record)``, ``("failed", error)`` or ``("interrupted", None)`` of one job:
     what a remote worker sends back (exceptions do not cross every engine intact)."""
     try:
-        return "done", run_job(spec, runs, threads, started)
+        return "done", run_job(spec, runs, threads, started, env)
     except JobInterrupted:
         return "interrupted", None
     except JobFailed as exc:
@@ -59,10 +59,13 @@ def _pass_on(live: set, lock: threading.Lock) -> None:
 
 
 class LocalExecutor:
-    """``workers`` jobs at a time on this machine, each command in a process of its own."""
+    """``workers`` jobs at a time on this machine, each command in a process of its own; on a
+    machine with ``gpus`` GPUs each running job sees one of its own (``CUDA_VISIBLE_DEVICES``),
+    when there are as many workers as GPUs or fewer."""
 
-    def __init__(self, runs: Path, workers: int, threads: int) -> None:
+    def __init__(self, runs: Path, workers: int, threads: int, gpus: int = 0) -> None:
         self.runs, self.workers, self.threads = runs, workers, threads
+        self.gpus = gpus if 0 < workers <= gpus else 0
 
     def run(self, jobs: list[JobSpec], report: Report) -> None:
         stop = threading.Event()
@@ -75,11 +78,21 @@ class LocalExecutor:
             if stop.is_set():
                 proc.send_signal(signal.SIGINT)
 
+        free = list(range(self.gpus))
+
         def work(job: JobSpec) -> tuple[str, Any]:
             if stop.is_set():
                 return "interrupted", None
             report(job.id, "running", None)
-            return outcome(job.to_dict(), str(self.runs), self.threads, started)
+            with lock:
+                gpu = free.pop() if free else None
+            env = None if gpu is None else {"CUDA_VISIBLE_DEVICES": str(gpu)}
+            try:
+                return outcome(job.to_dict(), str(self.runs), self.threads, started, env)
+            finally:
+                if gpu is not None:
+                    with lock:
+                        free.append(gpu)
 
         pool = ThreadPoolExecutor(max_workers=self.workers)
         futures: dict[Future, str] = {pool.submit(work, job): job.id for job in jobs}

@@ -54,7 +54,8 @@ def fit_run(folder: Path) -> tuple[Path | None, bool]:
 
 
 def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
-            started: Callable[[subprocess.Popen], None] | None = None) -> dict[str, Any]:
+            started: Callable[[subprocess.Popen], None] | None = None,
+            env: dict[str, str] | None = None) -> dict[str, Any]:
     """Run one job to its end and return its summary record: ``run``, ``steps``,
     ``wall_s`` (this attempt), ``mesh``, ``chamfer`` and ``fscore`` (when scored).
 
@@ -63,6 +64,7 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
         runs: the batch's runs folder; the job works in ``runs/<id>``.
         threads: torch threads of the fit (0: torch's default).
         started: called with each command's process as it starts (to forward a stop).
+        env: variables to set for the commands (e.g. ``CUDA_VISIBLE_DEVICES``).
 
     Raises:
         JobFailed: a step failed (the message names it and gives its error).
@@ -76,7 +78,7 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
     log = folder / "job.log"
 
     def step(name: str, *args: str) -> str:
-        return _command(name, list(args), log, threads, started)
+        return _command(name, list(args), log, threads, started, env)
 
     data = job.data
     if job.recording is not None:
@@ -142,10 +144,11 @@ def _steps(run: Path) -> int | None:
 
 
 def _command(name: str, args: list[str], log: Path, threads: int,
-             started: Callable[[subprocess.Popen], None] | None) -> str:
+             started: Callable[[subprocess.Popen], None] | None,
+             extra: dict[str, str] | None = None) -> str:
     """Run ``hybridneus NAME ARGS`` in its own process, its output appended to ``log``;
     return its stdout."""
-    env = dict(os.environ)
+    env = dict(os.environ) | (extra or {})
     if threads > 0:
         env |= {"OMP_NUM_THREADS": str(threads), "MKL_NUM_THREADS": str(threads)}
     cmd = [sys.executable, "-m", "hybridneus.cli.app", name, *args]

@@ -18,16 +18,18 @@ from hybridneus.batch.summary import rows, write_summary
 from hybridneus.errors import ConfigError
 
 
-def default_workers() -> int:
-    """One fit per GPU on a CUDA machine, else one per two cores."""
+def gpu_count() -> int:
+    """The CUDA GPUs torch sees here (0 without CUDA)."""
     try:
         import torch
-
-        if torch.cuda.is_available():
-            return torch.cuda.device_count()
     except ImportError:
-        pass
-    return max(1, (os.cpu_count() or 2) // 2)
+        return 0
+    return torch.cuda.device_count() if torch.cuda.is_available() else 0
+
+
+def default_workers() -> int:
+    """One fit per GPU on a CUDA machine, else one per two cores."""
+    return gpu_count() or max(1, (os.cpu_count() or 2) // 2)
 
 
 def make_executor(name: str, runs: Path, workers: int, threads: int, options: dict[str, Any]):
@@ -35,7 +37,7 @@ def make_executor(name: str, runs: Path, workers: int, threads: int, options: di
     from hybridneus.batch import executors
 
     if name == "local":
-        return executors.LocalExecutor(runs, workers, threads)
+        return executors.LocalExecutor(runs, workers, threads, gpu_count())
     if name == "ray":
         return executors.RayExecutor(runs, threads, options.get("num_cpus", max(threads, 1)),
                                      options.get("num_gpus", 0), options.get("address"))
@@ -101,4 +103,4 @@ def run_batch(jobs: list[JobSpec], runs: str | Path, executor, progress: bool = 
     return rows(ids, state.jobs)
 
 
-__all__ = ["default_workers", "make_executor", "run_batch"]
+__all__ = ["default_workers", "gpu_count", "make_executor", "run_batch"]
