@@ -2,7 +2,10 @@
 
 For every scene the suite simulates a full-size dataset once (cached), then for every seed and
 preset spec fits it in a fresh child process (so peak memory is per fit) and scores it with the
-paper's Chamfer protocol (benchmarks/suite_jobs.py). Scenes are the shared assets
+paper's Chamfer protocol (benchmarks/suite_jobs.py). The fits are the jobs of a batch
+(:mod:`hybridneus.batch`, docs/batch.md): one at a time by default, ``--workers N`` at a time
+on a larger machine (one per GPU on a GPU host), or on Ray or Slurm (``--executor``); the
+batch's state and each fit's report are kept under ``--out-runs``. Scenes are the shared assets
 (``../shared/assets``), generated objects (``--generated N``: N objects of the kinds of
 :mod:`hybridneus.simulate.generated` in turn, drawn from ``--generated-seed``; or named as
 ``generated:<kind>:<seed>``), or both. Fits run in the order scene, seed, preset, so presets
@@ -14,6 +17,7 @@ compared in one run are interleaved and share the machine's drift.
     python benchmarks/run_suite.py --generated 6 --iters 2000 --presets fast fast+train.lr=0.02
     python benchmarks/run_suite.py --scenes bunny --set priors.hull.enabled=false
     python benchmarks/run_suite.py --scenes generated:bowl:7 --spiral even --iters 2000
+    python benchmarks/run_suite.py --seeds 0 1 2 --threads 1 --workers 8   # 8 fits at once
 
 ``--spiral`` simulates the training split along another camera path (docs/simulate.md); its
 scenes are named apart (``gen-bowl-7-even``), so their lines never mix with the default
@@ -34,9 +38,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import common
@@ -155,11 +161,19 @@ def davis346_dataset(source: str, assets: dict[str, Path], cache: Path, duration
     return folder
 
 
-def launch(args, name: str, dataset: Path, spec: str, seed: int) -> dict | None:
-    """Fit (and unless ``--fit-only`` score) one run in a child process; append its line.
+@dataclass(frozen=True)
+class SuiteJob:
+    """One fit of the suite as a batch job: the ``_job`` child's command line."""
 
-    A failed fit is reported on stderr and skipped, so one scene cannot stop a suite.
-    """
+    id: str
+    cmd: tuple[str, ...]
+
+    def to_dict(self) -> dict:
+        return {"id": self.id, "cmd": list(self.cmd)}
+
+
+def suite_job(args, name: str, dataset: Path, spec: str, seed: int) -> SuiteJob:
+    """The job that fits (and unless ``--fit-only`` scores) one run in a child process."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "_job", "--scene", name,
            "--dataset", str(dataset), "--preset", spec, "--minutes", str(args.minutes or 0),
            "--iters", str(args.iters or 0), "--threads", str(args.threads),
@@ -170,23 +184,68 @@ def launch(args, name: str, dataset: Path, spec: str, seed: int) -> dict | None:
         cmd.append("--fit-only")
     for override in [*args.overrides, f"train.seed={seed}"]:
         cmd += ["--set", override]
-    budget = f"{args.minutes:g} min" if args.minutes else f"{args.iters} steps"
-    print(f"[suite] {name} {spec} seed {seed}, {budget} on {args.device}", file=sys.stderr,
-          flush=True)
-    # the child records the command that fitted it, for a line scored later by another one
-    env = {**os.environ,
-           common.FIT_COMMAND: os.environ.get(common.FIT_COMMAND) or common.command()}
-    proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True, env=env)
+    safe = "".join(c if c.isalnum() or c in "-_.=" else "_" for c in f"{name}-{spec}-s{seed}")
+    return SuiteJob(id=safe, cmd=tuple(cmd))
+
+
+def suite_task(spec: dict, runs: str, threads: int, started=None, env=None) -> tuple:
+    """A batch task (:mod:`hybridneus.batch.executors`): run the job's ``_job`` child, keep its
+    report in ``RUNS/<id>/report.json`` and return the batch's record of it."""
+    folder = Path(runs) / spec["id"]
+    folder.mkdir(parents=True, exist_ok=True)
+    proc = subprocess.Popen(spec["cmd"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, **(env or {})})
+    if started is not None:
+        started(proc)
+    try:
+        out, err = proc.communicate()
+    except BaseException:
+        proc.send_signal(signal.SIGINT)
+        proc.wait()
+        raise
+    (folder / "job.log").write_text(err)
+    if proc.returncode in (130, -signal.SIGINT):
+        return "interrupted", None
     if proc.returncode != 0:
-        print(f"[suite] {name} {spec} seed {seed}: the fit failed (exit {proc.returncode}); "
-              "skipped", file=sys.stderr, flush=True)
-        return None
-    report = json.loads(proc.stdout.strip().splitlines()[-1])
-    if args.fit_only:
-        print(f"[suite] {name}: {report['steps']} steps, run {report['run']}", file=sys.stderr,
-              flush=True)
-        return report
-    return record(args, report)
+        lines = [ln for ln in err.splitlines() if ln.strip()] or [f"exit {proc.returncode}"]
+        return "failed", f"the fit failed: {lines[-1].removeprefix('error: ')}"
+    report = json.loads(out.strip().splitlines()[-1])
+    (folder / "report.json").write_text(json.dumps(report))
+    return "done", {"steps": report.get("steps"), "wall_s": report.get("fit_wall_s"),
+                    "chamfer": report.get("chamfer"), "fscore": report.get("fscore"),
+                    "run": report.get("run"), "report": str(folder / "report.json")}
+
+
+def run_jobs(args, jobs: list[SuiteJob]) -> None:
+    """The suite's fits through ``hybridneus batch``'s executors (``--workers`` at a time, or
+    Ray or Slurm), a result line appended as each ends; a failed fit is reported and skipped,
+    so one scene cannot stop a suite."""
+    from hybridneus.batch import make_executor, run_batch
+
+    # the children record the command that fitted them, for a line scored later by another one
+    os.environ[common.FIT_COMMAND] = os.environ.get(common.FIT_COMMAND) or common.command()
+    runs = args.out_runs / time.strftime("suite-%Y%m%d-%H%M%S")
+    options = {"num_cpus": args.threads, "num_gpus": 1 if args.device.startswith("cuda") else 0,
+               "slurm": {"timeout_min": 24 * 60, "cpus_per_task": args.threads}}
+    engine = make_executor(args.executor, runs, args.workers, args.threads, options,
+                           task=suite_task)
+
+    def done(job_id: str, record_: dict) -> None:
+        report = json.loads(Path(record_["report"]).read_text())
+        if args.fit_only:
+            print(f"[suite] {job_id}: {report['steps']} steps, run {report['run']}",
+                  file=sys.stderr, flush=True)
+        else:
+            record(args, report)
+
+    budget = f"{args.minutes:g} min" if args.minutes else f"{args.iters} steps"
+    print(f"[suite] {len(jobs)} fits of {budget} on {args.device}, {args.workers} at a time "
+          f"({args.executor}); batch state in {runs}", file=sys.stderr, flush=True)
+    rows = run_batch(jobs, runs, engine, progress=False, on_done=done)
+    for row in rows:
+        if row["status"] != "done":
+            print(f"[suite] {row['job']}: {row['error'] or row['status']}; skipped",
+                  file=sys.stderr, flush=True)
 
 
 def record(args, report: dict) -> dict:
@@ -261,7 +320,12 @@ def main() -> None:
     ap.add_argument("--spiral", choices=("seiffert", "even", "circle"), default=DEFAULT_SPIRAL,
                     help="camera path of the training split (default: Seiffert's spiral, the "
                     "EventNeRF scenes' path)")
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=2, help="torch threads of each fit")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="fits at a time (hybridneus batch's local executor); timings "
+                    "compared across lines need the same count")
+    ap.add_argument("--executor", choices=("local", "ray", "slurm"), default="local",
+                    help="where the fits run (docs/batch.md)")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/hybridneus-bench"))
     ap.add_argument("--out-runs", type=Path, default=Path("/tmp/hybridneus-bench/suite-runs"))
@@ -296,10 +360,9 @@ def main() -> None:
     # now, not when its turn comes hours in
     datasets = {suite_name(s, args): dataset_for(s, assets, args) for s in sources}
     args.out_runs.mkdir(parents=True, exist_ok=True)
-    for name, folder in datasets.items():
-        for seed in args.seeds:
-            for spec in args.presets:
-                launch(args, name, folder, spec, seed)
+    run_jobs(args, [suite_job(args, name, folder, spec, seed)
+                    for name, folder in datasets.items()
+                    for seed in args.seeds for spec in args.presets])
 
 
 if __name__ == "__main__":

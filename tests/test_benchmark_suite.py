@@ -46,6 +46,8 @@ def test_fit_only_then_score_runs_elsewhere(tiny_scene, tmp_path):
          "--seeds", "3", "--presets", "fast", "--out", str(tmp_path / "unused.jsonl"),
          *common, *sets)
     assert not (tmp_path / "unused.jsonl").exists()  # --fit-only records nothing
+    (state,) = (tmp_path / "runs").glob("suite-*/batch.json")  # the fits ran as a batch
+    assert [r["status"] for r in json.loads(state.read_text())["jobs"].values()] == ["done"]
     (run,) = [p for p in (tmp_path / "runs").iterdir() if p.name.startswith(tag)]
     snapshots = sorted((run / "snapshots").glob("t*.pt"))
     assert [int(p.stem.split("-s")[1]) for p in snapshots] == [3, 6]  # halfway, the end

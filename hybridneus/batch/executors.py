@@ -2,6 +2,10 @@
 through submitit. Each executor calls :func:`~hybridneus.batch.job.run_job` for every job and
 reports as jobs end, in the order they end.
 
+Each runs a *task* per job: by default :func:`outcome` of :func:`~hybridneus.batch.job.run_job`;
+any function of the same signature (``task(spec, runs, threads, started, env)`` returning
+``(event, value)``) may stand in, as the accuracy suite's own fit-and-score job does.
+
 ``run(jobs, report)`` blocks until every job has ended, calling ``report(job_id, event,
 value)`` with event ``"running"`` (value None), ``"done"`` (the job's record), ``"failed"``
 (the one-line error) or ``"interrupted"`` (the batch was stopped: the job is left to the next
@@ -23,6 +27,7 @@ from hybridneus.batch.manifest import JobSpec
 from hybridneus.errors import ConfigError
 
 Report = Callable[[str, str, Any], None]
+Task = Callable[..., tuple[str, Any]]
 EXECUTORS = ("local", "ray", "slurm")
 
 
@@ -63,9 +68,11 @@ class LocalExecutor:
     machine with ``gpus`` GPUs each running job sees one of its own (``CUDA_VISIBLE_DEVICES``),
     when there are as many workers as GPUs or fewer."""
 
-    def __init__(self, runs: Path, workers: int, threads: int, gpus: int = 0) -> None:
+    def __init__(self, runs: Path, workers: int, threads: int, gpus: int = 0,
+                 task: Task | None = None) -> None:
         self.runs, self.workers, self.threads = runs, workers, threads
         self.gpus = gpus if 0 < workers <= gpus else 0
+        self.task = task
 
     def run(self, jobs: list[JobSpec], report: Report) -> None:
         stop = threading.Event()
@@ -88,7 +95,8 @@ class LocalExecutor:
                 gpu = free.pop() if free else None
             env = None if gpu is None else {"CUDA_VISIBLE_DEVICES": str(gpu)}
             try:
-                return outcome(job.to_dict(), str(self.runs), self.threads, started, env)
+                return (self.task or outcome)(job.to_dict(), str(self.runs), self.threads,
+                                              started, env)
             finally:
                 if gpu is not None:
                     with lock:
@@ -125,9 +133,10 @@ class RayExecutor:
     local Ray unless ``address`` names a running cluster (``auto`` or ``ray://host:10001``)."""
 
     def __init__(self, runs: Path, threads: int, num_cpus: float, num_gpus: float,
-                 address: str | None) -> None:
+                 address: str | None, task: Task | None = None) -> None:
         self.runs, self.threads = runs, threads
         self.num_cpus, self.num_gpus, self.address = num_cpus, num_gpus, address
+        self.task = task
 
     def run(self, jobs: list[JobSpec], report: Report) -> None:
         ray = _need("ray", "ray")
@@ -135,7 +144,7 @@ class RayExecutor:
             ray.init(address=self.address, include_dashboard=False, log_to_driver=False,
                      configure_logging=False)
         task = ray.remote(num_cpus=self.num_cpus, num_gpus=self.num_gpus,
-                          max_retries=0)(outcome)
+                          max_retries=0)(self.task or outcome)
         refs = {}
         for job in jobs:
             refs[task.remote(job.to_dict(), str(self.runs), self.threads)] = job.id
@@ -166,14 +175,15 @@ class SubmititJob:
     job's end, submitit calls :meth:`checkpoint`: the running command is interrupted (a fit
     saves a checkpoint) and the job is requeued, to resume where it stopped."""
 
-    def __init__(self) -> None:
+    def __init__(self, task: Task | None = None) -> None:
         self._proc = None
+        self.task = task
 
     def __call__(self, spec: dict, runs: str, threads: int) -> tuple[str, Any]:
         def started(proc) -> None:
             self._proc = proc
 
-        return outcome(spec, runs, threads, started)
+        return (self.task or outcome)(spec, runs, threads, started)
 
     def checkpoint(self, spec: dict, runs: str, threads: int):
         import submitit
@@ -182,7 +192,7 @@ class SubmititJob:
         if proc is not None and proc.poll() is None:
             proc.send_signal(signal.SIGINT)
             proc.wait()
-        return submitit.helpers.DelayedSubmission(SubmititJob(), spec, runs, threads)
+        return submitit.helpers.DelayedSubmission(SubmititJob(self.task), spec, runs, threads)
 
 
 class SlurmExecutor:
@@ -190,16 +200,17 @@ class SlurmExecutor:
     path in processes on this machine, as submitit's ``LocalExecutor``)."""
 
     def __init__(self, runs: Path, threads: int, parameters: dict[str, Any],
-                 cluster: str | None = None) -> None:
+                 cluster: str | None = None, task: Task | None = None) -> None:
         self.runs, self.threads = runs, threads
         self.parameters, self.cluster = parameters, cluster
+        self.task = task
 
     def run(self, jobs: list[JobSpec], report: Report) -> None:
         submitit = _need("submitit", "slurm")
         executor = submitit.AutoExecutor(folder=self.runs / ".submitit", cluster=self.cluster)
         executor.update_parameters(**self.parameters)
         with executor.batch():
-            handles = [executor.submit(SubmititJob(), job.to_dict(), str(self.runs),
+            handles = [executor.submit(SubmititJob(self.task), job.to_dict(), str(self.runs),
                                        self.threads) for job in jobs]
         waiting = dict(zip(handles, (j.id for j in jobs), strict=True))
         for job in jobs:

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 from hybridneus.batch.executors import EXECUTORS
-from hybridneus.batch.manifest import JobSpec
 from hybridneus.batch.state import BatchState
 from hybridneus.batch.summary import rows, write_summary
 from hybridneus.errors import ConfigError
@@ -32,25 +31,35 @@ def default_workers() -> int:
     return gpu_count() or max(1, (os.cpu_count() or 2) // 2)
 
 
-def make_executor(name: str, runs: Path, workers: int, threads: int, options: dict[str, Any]):
-    """The executor called ``name`` (one of :data:`~hybridneus.batch.executors.EXECUTORS`)."""
+def make_executor(name: str, runs: Path, workers: int, threads: int, options: dict[str, Any],
+                  task=None):
+    """The executor called ``name`` (one of :data:`~hybridneus.batch.executors.EXECUTORS`),
+    running ``task`` for each job (default: :func:`~hybridneus.batch.executors.outcome`)."""
     from hybridneus.batch import executors
 
     if name == "local":
-        return executors.LocalExecutor(runs, workers, threads, gpu_count())
+        return executors.LocalExecutor(runs, workers, threads, gpu_count(), task)
     if name == "ray":
         return executors.RayExecutor(runs, threads, options.get("num_cpus", max(threads, 1)),
-                                     options.get("num_gpus", 0), options.get("address"))
+                                     options.get("num_gpus", 0), options.get("address"), task)
     if name == "slurm":
         return executors.SlurmExecutor(runs, threads, options.get("slurm", {}),
-                                       options.get("cluster"))
+                                       options.get("cluster"), task)
     raise ConfigError(f"--executor {name}: expected one of {', '.join(EXECUTORS)}")
 
 
-def run_batch(jobs: list[JobSpec], runs: str | Path, executor, progress: bool = True
-              ) -> list[dict[str, Any]]:
+def run_batch(jobs: list, runs: str | Path, executor, progress: bool = True,
+              on_done=None) -> list[dict[str, Any]]:
     """Run the jobs of ``jobs`` that ``runs``' state does not list as done; return the
     summary's rows (every job of ``jobs``).
+
+    Args:
+        jobs: :class:`~hybridneus.batch.manifest.JobSpec` s, or any objects with an ``id``
+            and a ``to_dict()`` that the executor's task takes.
+        runs: the batch's folder (state, summary, the jobs' folders).
+        executor: from :func:`make_executor`.
+        progress: show the batch's progress bar.
+        on_done: called with ``(job_id, record)`` as each job ends done.
 
     Raises:
         KeyboardInterrupt: after a Ctrl-C, once the running jobs have stopped and the state
@@ -87,6 +96,8 @@ def run_batch(jobs: list[JobSpec], runs: str | Path, executor, progress: bool = 
                     state.update(job_id, status="running")
                 elif event == "done":
                     state.update(job_id, status="done", **value)
+                    if on_done is not None:
+                        on_done(job_id, value)
                 elif event == "failed":
                     state.update(job_id, status="failed", error=value)
                     log.warning("%s: failed: %s", job_id, value)
