@@ -59,6 +59,7 @@ def batch(
 
     from hybridneus.batch import default_workers, load_manifest, make_executor, run_batch
     from hybridneus.batch.executors import EXECUTORS
+    from hybridneus.batch.runner import gpu_count
     from hybridneus.cli.options import log_to_stderr
     from hybridneus.errors import ConfigError
     from hybridneus.fileio import check_output
@@ -73,7 +74,8 @@ def batch(
     if workers < 1:
         raise ConfigError(f"--workers {workers}: must be >= 1")
     if threads is None:
-        threads = 0 if gpus_per_task else max(1, (os.cpu_count() or 1) // workers)
+        on_gpu = gpus_per_task or (executor == "local" and gpu_count())
+        threads = 0 if on_gpu else max(1, (os.cpu_count() or 1) // workers)
     if threads < 0:
         raise ConfigError(f"--threads {threads}: must be >= 0")
     cpus = cpus_per_task or max(threads, 1)
