@@ -639,7 +639,45 @@ def other_cases() -> list[Case]:
         Case(sim, "demo --minutes -1", lambda ws, d: ["demo", "--out", "demo", "--minutes",
                                                       "-1"], sees="minutes"),
     ]
-    return info + simulate
+    return info + simulate + batch_cases()
+
+
+def _manifest(content: str) -> Callable[[Workspace, Path], Path]:
+    def make(ws: Workspace, d: Path) -> Path:
+        (d / "m.yaml").write_text(content.replace("DATA", str(ws.data)))
+        return d / "m.yaml"
+    return make
+
+
+def batch_cases() -> list[Case]:
+    good = "jobs:\n  - {name: a, data: DATA, iters: 2, mesh: false}\n"
+
+    def case(what: str, manifest, extra: list[str], sees: str, before=None) -> Case:
+        def prepare(ws: Workspace, d: Path) -> list[str]:
+            path = manifest(ws, d) if callable(manifest) else d / manifest
+            if before is not None:
+                before(d)
+            return ["batch", str(path), "--out", str(d / "runs"), "-q", *extra]
+        return Case("batch", what, prepare, sees=sees)
+
+    def garbage_state(d: Path) -> None:
+        (d / "runs").mkdir()
+        (d / "runs" / "batch.json").write_text("not json")
+
+    return [
+        case("batch: manifest missing", "nope.yaml", [], "nope.yaml"),
+        case("batch: manifest not YAML", _manifest("jobs: [a, {"), [], "m.yaml"),
+        case("batch: a job with an unknown key", _manifest(
+            "jobs:\n  - {name: a, data: DATA, colour: red}\n"), [], "colour"),
+        case("batch: a job with no dataset", _manifest("jobs:\n  - {name: a}\n"), [],
+             "data"),
+        case("batch: two jobs of one name", _manifest(good + "  - {name: a, data: DATA}\n"),
+             [], "two jobs"),
+        case("batch --executor dask", _manifest(good), ["--executor", "dask"], "dask"),
+        case("batch --workers 0", _manifest(good), ["--workers", "0"], "workers"),
+        case("batch: a state file of garbage", _manifest(good), [], "batch.json",
+             before=garbage_state),
+    ]
 
 
 def convert_case(what: str, events=None, extra: list[str] | None = None, sees: str = "",
