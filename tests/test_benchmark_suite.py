@@ -21,6 +21,7 @@ def _suite_module():
     sys.path.insert(0, str(SUITE.parent))  # the benchmarks import their common module
     spec = importlib.util.spec_from_file_location("run_suite", SUITE)
     module = importlib.util.module_from_spec(spec)
+    sys.modules["run_suite"] = module  # its dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
 
