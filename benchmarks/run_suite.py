@@ -36,10 +36,9 @@ turns them into docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
-import signal
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -188,32 +187,23 @@ def suite_job(args, name: str, dataset: Path, spec: str, seed: int) -> SuiteJob:
     return SuiteJob(id=safe, cmd=tuple(cmd))
 
 
-def suite_task(spec: dict, runs: str, threads: int, started=None, env=None) -> tuple:
-    """A batch task (:mod:`hybridneus.batch.executors`): run the job's ``_job`` child, keep its
-    report in ``RUNS/<id>/report.json`` and return the batch's record of it."""
+def fit_and_score(spec: dict, runs: str, threads: int, started=None, env=None) -> dict:
+    """A batch job (:func:`hybridneus.batch.job.run_job`'s signature): the ``_job`` child,
+    its report kept in ``RUNS/<id>/report.json``; returns the batch's record of it.
+
+    Raises:
+        JobFailed, JobInterrupted: as :func:`hybridneus.batch.job.run_command` does.
+    """
+    from hybridneus.batch.job import run_command
+
     folder = Path(runs) / spec["id"]
     folder.mkdir(parents=True, exist_ok=True)
-    proc = subprocess.Popen(spec["cmd"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env={**os.environ, **(env or {})})
-    if started is not None:
-        started(proc)
-    try:
-        out, err = proc.communicate()
-    except BaseException:
-        proc.send_signal(signal.SIGINT)
-        proc.wait()
-        raise
-    (folder / "job.log").write_text(err)
-    if proc.returncode in (130, -signal.SIGINT):
-        return "interrupted", None
-    if proc.returncode != 0:
-        lines = [ln for ln in err.splitlines() if ln.strip()] or [f"exit {proc.returncode}"]
-        return "failed", f"the fit failed: {lines[-1].removeprefix('error: ')}"
+    out = run_command(spec["cmd"], "fit", folder / "job.log", started, env)
     report = json.loads(out.strip().splitlines()[-1])
     (folder / "report.json").write_text(json.dumps(report))
-    return "done", {"steps": report.get("steps"), "wall_s": report.get("fit_wall_s"),
-                    "chamfer": report.get("chamfer"), "fscore": report.get("fscore"),
-                    "run": report.get("run"), "report": str(folder / "report.json")}
+    return {"steps": report.get("steps"), "wall_s": report.get("fit_wall_s"),
+            "chamfer": report.get("chamfer"), "fscore": report.get("fscore"),
+            "run": report.get("run"), "report": str(folder / "report.json")}
 
 
 def run_jobs(args, jobs: list[SuiteJob]) -> None:
@@ -221,6 +211,7 @@ def run_jobs(args, jobs: list[SuiteJob]) -> None:
     Ray or Slurm), a result line appended as each ends; a failed fit is reported and skipped,
     so one scene cannot stop a suite."""
     from hybridneus.batch import make_executor, run_batch
+    from hybridneus.batch.executors import outcome
 
     # the children record the command that fitted them, for a line scored later by another one
     os.environ[common.FIT_COMMAND] = os.environ.get(common.FIT_COMMAND) or common.command()
@@ -228,7 +219,7 @@ def run_jobs(args, jobs: list[SuiteJob]) -> None:
     options = {"num_cpus": args.threads, "num_gpus": 1 if args.device.startswith("cuda") else 0,
                "slurm": {"timeout_min": 24 * 60, "cpus_per_task": args.threads}}
     engine = make_executor(args.executor, runs, args.workers, args.threads, options,
-                           task=suite_task)
+                           task=functools.partial(outcome, job=fit_and_score))
 
     def done(job_id: str, record_: dict) -> None:
         report = json.loads(Path(record_["report"]).read_text())

@@ -4,7 +4,8 @@ reports as jobs end, in the order they end.
 
 Each runs a *task* per job: by default :func:`outcome` of :func:`~hybridneus.batch.job.run_job`;
 any function of the same signature (``task(spec, runs, threads, started, env)`` returning
-``(event, value)``) may stand in, as the accuracy suite's own fit-and-score job does.
+``(event, value)``) may stand in, as :func:`outcome` of the accuracy suite's own fit-and-score
+job does.
 
 ``run(jobs, report)`` blocks until every job has ended, calling ``report(job_id, event,
 value)`` with event ``"running"`` (value None), ``"done"`` (the job's record), ``"failed"``
@@ -37,11 +38,12 @@ def _first_line(exc: BaseException) -> str:
 
 
 def outcome(spec: dict, runs: str, threads: int, started: Callable | None = None,
-            env: dict[str, str] | None = None) -> tuple[str, Any]:
+            env: dict[str, str] | None = None, job: Callable = run_job) -> tuple[str, Any]:
     """``("done", record)``, ``("failed", error)`` or ``("interrupted", None)`` of one job:
-    what a remote worker sends back (exceptions do not cross every engine intact)."""
+    what a remote worker sends back (exceptions do not cross every engine intact). ``job``:
+    the function that runs it (:func:`~hybridneus.batch.job.run_job`'s signature)."""
     try:
-        return "done", run_job(spec, runs, threads, started, env)
+        return "done", job(spec, runs, threads, started, env)
     except JobInterrupted:
         return "interrupted", None
     except JobFailed as exc:

@@ -3,7 +3,8 @@ and ``eval``, each the ``hybridneus`` command in a process of its own, so that a
 out-of-memory kill takes only its job and every error is the command's own one-line message.
 
 A job's folder ``RUNS/<id>/`` holds ``data/`` (a converted recording), ``fit/`` (the fit's runs
-folder), ``fit.json`` (the run folder of the fit once it ended), ``mesh.ply``, ``eval.json``
+folder), ``fit.json`` (the run folder and steps of the fit once it ended), ``mesh.ply``,
+``eval.json``
 and ``job.log`` (every command and what it printed). Each step is skipped when its output is
 already there, and an interrupted fit (a run folder with a checkpoint, no ``fit.json``) is
 resumed with ``fit --resume``: running a job again finishes it rather than starting it over.
@@ -38,19 +39,20 @@ class JobInterrupted(HybridNeusError):
     """A step was stopped by an interrupt; the job can be run again to finish it."""
 
 
-def fit_run(folder: Path) -> tuple[Path | None, bool]:
-    """A job's fit run folder and whether the fit ended: the run ``fit.json`` names, else the
-    newest run folder under ``fit/`` holding a checkpoint (to resume), else None."""
+def fit_run(folder: Path) -> tuple[Path | None, dict | None]:
+    """A job's fit run folder and, once the fit ended, ``fit.json`` (its ``run`` and
+    ``steps``): the run ``fit.json`` names, else the newest run folder under ``fit/`` holding
+    a checkpoint (to resume, with None), else ``(None, None)``."""
     from hybridneus.training.runs import CHECKPOINT
 
-    ended = folder / "fit.json"
-    if ended.is_file():
-        run = Path(json.loads(ended.read_text())["run"])
-        if run.is_dir():
-            return run, True
+    path = folder / "fit.json"
+    if path.is_file():
+        ended = json.loads(path.read_text())
+        if Path(ended["run"]).is_dir():
+            return Path(ended["run"]), ended
     started = sorted((p for p in (folder / "fit").glob("*") if (p / CHECKPOINT).is_file()),
                      key=lambda p: p.stat().st_mtime)
-    return (started[-1], False) if started else (None, False)
+    return (started[-1] if started else None), None
 
 
 def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
@@ -86,8 +88,8 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
         if not (folder / "data" / "scene.json").is_file():
             step("convert", job.recording, data, *job.convert, "-q")
     fit_root = folder / "fit"
-    run, finished = fit_run(folder)
-    if not finished:
+    run, ended = fit_run(folder)
+    if ended is None:
         if run is not None:
             out = step("fit", "--resume", str(run), "--device", job.device, "--quiet")
         else:
@@ -105,10 +107,10 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
         found = re.search(r"^run: (.+) \(step (\d+)\)$", out, re.M)
         if found is None or not Path(found[1]).is_dir():
             raise JobFailed(f"fit: ended without naming its run (see {log})")
-        run = Path(found[1])
+        run, ended = Path(found[1]), {"run": found[1], "steps": int(found[2])}
         with atomic_path(folder / "fit.json") as tmp:
-            tmp.write_text(json.dumps({"run": str(run)}) + "\n")
-    record: dict[str, Any] = {"run": str(run), "steps": _steps(run)}
+            tmp.write_text(json.dumps(ended) + "\n")
+    record: dict[str, Any] = {"run": str(run), "steps": ended["steps"]}
     if job.mesh is not None:
         mesh = folder / "mesh.ply"
         if not mesh.is_file():
@@ -128,34 +130,31 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
     return record
 
 
-def _steps(run: Path) -> int | None:
-    """The steps a finished run trained, from its metrics (None when it logged none)."""
-    metrics = run / "metrics.csv"
-    if not metrics.is_file():
-        return None
-    lines = metrics.read_text().strip().splitlines()
-    if len(lines) < 2:
-        return None
-    head = lines[0].split(",")
-    try:
-        return int(float(lines[-1].split(",")[head.index("step")]))
-    except (ValueError, IndexError):
-        return None
-
-
 def _command(name: str, args: list[str], log: Path, threads: int,
              started: Callable[[subprocess.Popen], None] | None,
              extra: dict[str, str] | None = None) -> str:
-    """Run ``hybridneus NAME ARGS`` in its own process, its output appended to ``log``;
-    return its stdout."""
-    env = dict(os.environ) | (extra or {})
+    """Run ``hybridneus NAME ARGS`` (:func:`run_command`) with ``threads`` threads."""
+    env = dict(extra or {})
     if threads > 0:
         env |= {"OMP_NUM_THREADS": str(threads), "MKL_NUM_THREADS": str(threads)}
-    cmd = [sys.executable, "-m", "hybridneus.cli.app", name, *args]
+    return run_command([sys.executable, "-m", "hybridneus.cli.app", name, *args], name, log,
+                       started, env, shown=f"hybridneus {name} {' '.join(args)}")
+
+
+def run_command(cmd: list[str], name: str, log: Path,
+                started: Callable[[subprocess.Popen], None] | None = None,
+                env: dict[str, str] | None = None, shown: str | None = None) -> str:
+    """Run ``cmd`` in its own process, it and its output appended to ``log``; return its
+    stdout. An interrupt while it runs is passed on to it (a fit saves a checkpoint).
+
+    Raises:
+        JobInterrupted: it ended on an interrupt.
+        JobFailed: it failed: ``"<name>: <its last error line>"``.
+    """
     with open(log, "a") as f:
-        f.write(f"$ hybridneus {name} {' '.join(args)}\n")
+        f.write(f"$ {shown or ' '.join(cmd)}\n")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env)
+                            env=dict(os.environ) | (env or {}))
     if started is not None:
         started(proc)
     try:
@@ -170,12 +169,12 @@ def _command(name: str, args: list[str], log: Path, threads: int,
         raise JobInterrupted(f"{name}: interrupted")
     if proc.returncode != 0:
         lines = [ln for ln in err.splitlines() if ln.strip()]
-        shown = next((ln for ln in reversed(lines) if ln.startswith("error:")),
-                     lines[-1] if lines else f"exit code {proc.returncode}")
+        message = next((ln for ln in reversed(lines) if ln.startswith("error:")),
+                       lines[-1] if lines else f"exit code {proc.returncode}")
         if proc.returncode < 0:
-            shown = f"killed by signal {-proc.returncode}"
-        raise JobFailed(f"{name}: {shown.removeprefix('error: ')}")
+            message = f"killed by signal {-proc.returncode}"
+        raise JobFailed(f"{name}: {message.removeprefix('error: ')}")
     return out
 
 
-__all__ = ["JobFailed", "JobInterrupted", "fit_run", "run_job"]
+__all__ = ["JobFailed", "JobInterrupted", "fit_run", "run_command", "run_job"]

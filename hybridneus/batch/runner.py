@@ -110,8 +110,9 @@ def run_batch(jobs: list, runs: str | Path, executor, progress: bool = True,
             if todo:
                 executor.run([j for j in jobs if j.id in todo], report)
         finally:
-            write_summary(runs, rows(ids, state.jobs))
-    return rows(ids, state.jobs)
+            table = rows(ids, state.jobs)
+            write_summary(runs, table)
+    return table
 
 
 __all__ = ["default_workers", "gpu_count", "make_executor", "run_batch"]

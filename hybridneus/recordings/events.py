@@ -99,7 +99,7 @@ class FaerySource(EventSource):
 
 
 #: What h5py raises on a damaged file (besides its OSError for unreadable chunks).
-_H5_FAULTS = (OSError, KeyError, RuntimeError, ValueError, TypeError, IndexError)
+H5_FAULTS = (OSError, KeyError, RuntimeError, ValueError, TypeError, IndexError)
 
 
 #: HDF5 event layouts: the arrays' names (t, x, y, p order) and what to call the layout.
@@ -134,7 +134,7 @@ class HDF5Source(EventSource):
             self._layout(h5py, path, time_unit)
         except RecordingError:
             raise
-        except _H5_FAULTS as exc:
+        except H5_FAULTS as exc:
             raise RecordingError(f"{path}: damaged HDF5 file ({first_line(exc)})") from None
 
     def _layout(self, h5py, path: Path, time_unit: str | None) -> None:
@@ -179,7 +179,7 @@ class HDF5Source(EventSource):
                 t = t_col[s:e].astype(np.int64) + self._offset if t_col.dtype.kind in "iu" \
                     else t_col[s:e].astype(np.float64) + self._offset
                 x, y, p = x_col[s:e], y_col[s:e], p_col[s:e]
-            except _H5_FAULTS as exc:
+            except H5_FAULTS as exc:
                 raise RecordingError(
                     f"{self.path}: cannot decode events {s}..{e} ({first_line(exc)}; a "
                     "compression filter hdf5plugin lacks?)") from None

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from hybridneus.errors import RecordingError
-from hybridneus.recordings.stream import first_line, need
+from hybridneus.recordings.stream import TIME_UNITS, first_line, need
 
 #: The gamma the layout's ``rgb/`` files are encoded with.
 GAMMA = 2.2
@@ -82,7 +82,7 @@ def read_frames(path: str | Path, size: tuple[int, int], time_unit: str | None =
 
 
 def _hdf5_frames(path: Path, size: tuple[int, int], time_unit: str | None) -> list[ApsFrame]:
-    from hybridneus.recordings.stream import TIME_UNITS
+    from hybridneus.recordings.events import H5_FAULTS
 
     h5py = need("h5py", path, "HDF5 files")
     need("hdf5plugin", path, "compressed HDF5 files")
@@ -109,7 +109,7 @@ def _hdf5_frames(path: Path, size: tuple[int, int], time_unit: str | None) -> li
                                         path, (0, 0)))
     except RecordingError:
         raise
-    except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
+    except H5_FAULTS as exc:
         raise RecordingError(f"{path}: reading its frames failed ({first_line(exc)})") from None
     return frames
 

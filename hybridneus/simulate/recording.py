@@ -153,6 +153,13 @@ def aps_frames(view_image, view_t: np.ndarray, fps: float, exposure: float, t0: 
     return frames
 
 
+def _bgr_values(frame) -> np.ndarray:
+    """An :class:`~hybridneus.recordings.frames.ApsFrame` as stored: its bits' unsigned
+    integers, in OpenCV's blue-green-red order."""
+    top, dtype = (65535.0, np.uint16) if frame.bits == 16 else (255.0, np.uint8)
+    return np.round(np.clip(frame.image, 0.0, 1.0) * top).astype(dtype)[..., ::-1]
+
+
 def write_aedat4(path, rec: Recording, frames: list, size: tuple[int, int]) -> None:
     """Events (track 0) and frames (track 1) of a recording as an AEDAT4 file, written by
     iniVation's dv-processing as DV writes a DAVIS346's (``pip install -e ".[recordings]"``).
@@ -185,9 +192,7 @@ def write_aedat4(path, rec: Recording, frames: list, size: tuple[int, int]) -> N
         writer.writeEvents(store)
     for f in frames:
         start = int(round((f.t - 0.5 * f.exposure) * 1e6))
-        top, dtype = (65535.0, np.uint16) if f.bits == 16 else (255.0, np.uint8)
-        values = np.round(np.clip(f.image, 0.0, 1.0) * top).astype(dtype)
-        bgr = np.ascontiguousarray(values[..., ::-1])  # DV stores OpenCV's channel order
+        bgr = np.ascontiguousarray(_bgr_values(f))  # DV stores OpenCV's channel order
         writer.writeFrame(dv.Frame(start, int(round(f.exposure * 1e6)), 0, 0, bgr,
                                    dv.FrameSource.SENSOR))
     del writer  # closes the file
@@ -217,9 +222,7 @@ def write_hdf5(path, rec: Recording, frames: list, size: tuple[int, int]) -> Non
         f.create_dataset("events/ts", data=np.asarray(rec.t, dtype=np.float64))
         f.create_dataset("events/ps", data=(np.asarray(rec.p) > 0).astype(np.uint8))
         for i, fr in enumerate(frames):
-            top, dtype = (65535.0, np.uint16) if fr.bits == 16 else (255.0, np.uint8)
-            values = np.round(np.clip(fr.image, 0.0, 1.0) * top).astype(dtype)
-            dset = f.create_dataset(f"images/image{i:09d}", data=values[..., ::-1])
+            dset = f.create_dataset(f"images/image{i:09d}", data=_bgr_values(fr))
             dset.attrs["timestamp"] = float(fr.t)
             dset.attrs["type"] = "color_bgr"
         f.attrs["sensor_resolution"] = (int(size[1]), int(size[0]))
