@@ -33,6 +33,7 @@ _COMMANDS: list[tuple[str, str, str]] = [
     ("render", "render", "render"),
     ("demo", "demo", "demo"),
     ("batch", "batch", "batch"),
+    ("report", "report", "report"),
 ]
 
 for _name, _module, _func in _COMMANDS:

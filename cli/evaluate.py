@@ -43,7 +43,8 @@ def evaluate(
     errors: Annotated[
         Path | None,
         typer.Option("--errors", help="Also write a PNG: GT coloured by its distance to the "
-                     "mesh above the mesh coloured by its distance to GT."),
+                     "mesh above the mesh coloured by its distance to GT (a mesh in a run folder: "
+                     "RUN/errors.png by default, its scores in RUN/eval.json)."),
     ] = None,
     error_max: Annotated[
         float, typer.Option("--error-max", help="Distance (unit cube) shown in the last colour.")
@@ -100,10 +101,20 @@ def evaluate(
         result["planes"] = [f.as_dict() for f in faces]
         result["plane_rms"] = plane_rms(faces)
     result["seconds"] = round(time.perf_counter() - start, 3)
+    # A mesh in a run folder: the scores and the error picture stay with the run, for its
+    # report (hybridneus report).
+    run = mesh.parent if (mesh.parent / "config.yaml").is_file() else None
+    if errors is None and run is not None:
+        errors = run / "errors.png"
     if errors is not None:
         from hybridneus.evaluation import save_error_image
 
         result["errors"] = str(save_error_image(pred_mesh, gt_mesh, errors, vmax=error_max))
+    if run is not None:
+        from hybridneus.fileio import atomic_path
+
+        with atomic_path(run / "eval.json") as tmp:
+            tmp.write_text(json.dumps(result, indent=2) + "\n")
     if json_out:
         typer.echo(json.dumps(result, indent=2))
         return
@@ -153,3 +164,5 @@ def evaluate(
         Console().print(by_face)
     if errors is not None:
         typer.echo(f"error picture: {result['errors']}")
+    if run is not None:
+        typer.echo(f"scores kept in {run / 'eval.json'} (hybridneus report {run} shows them)")

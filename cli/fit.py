@@ -53,6 +53,8 @@ def fit(
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed.", show_default=False)] = None,
     quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+    report: Annotated[bool, typer.Option(help="Write the run's report.html at the end "
+                                         "(see hybridneus report).")] = True,
 ) -> None:
     """Train on DATA's event stream and write a run folder (config, checkpoints, previews).
 
@@ -102,6 +104,7 @@ def fit(
         device=device,
         progress=not quiet,
         started=started,
+        report=report,
     )
     run_dir = field.run_dir
     if field.interrupted:

@@ -42,6 +42,7 @@ _LAZY: dict[str, str] = {
     "chamfer_distance": "hybridneus.evaluation",
     "sdf_mae": "hybridneus.evaluation",
     "color_corrected_psnr_ssim": "hybridneus.evaluation",
+    "write_report": "hybridneus.report",
 }
 
 

@@ -12,10 +12,13 @@ import logging
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hybridneus.config import Config, apply_overrides, preset_config, rays_per_step, validate
 from hybridneus.errors import ConfigError, RunError
+
+if TYPE_CHECKING:
+    from hybridneus.model.field import HybridField
 
 
 def _resolve_config(config: Config | str | None, overrides: Sequence[str]) -> Config:
@@ -62,7 +65,8 @@ def fit(
     device: str = "auto",
     progress: bool = False,
     started: float | None = None,
-):
+    report: bool = True,
+) -> HybridField:
     """Train a hybrid NeuS field from an event dataset and return it.
 
     Args:
@@ -81,6 +85,8 @@ def fit(
         progress: show a progress bar on stderr.
         started: the ``time.perf_counter()`` from which a ``train.minutes`` budget counts
             (default: the call); the CLI passes its own start.
+        report: write the run's ``report.html`` at the end (:mod:`hybridneus.report`; also
+            after a resume). A report that cannot be written is a warning, never an error.
 
     Returns:
         The trained :class:`~hybridneus.model.field.HybridField` (a ``Field``); its
@@ -94,9 +100,26 @@ def fit(
     trainer, logger = prepare(dataset, config, overrides, out, resume, device, started)
     field = trainer.fit(callbacks, logger, progress=progress)
     field.run_dir = logger.run_dir if logger is not None else None
+    if report and logger is not None:
+        _write_report(logger.run_dir)
     field.interrupted = trainer.interrupted
     field.trainer_step = trainer.step
     return field
+
+
+def _write_report(run_dir: Path) -> None:
+    """The run's report; any failure is logged as a warning (a report never fails a fit)."""
+    import logging
+
+    log = logging.getLogger("hybridneus")
+    try:
+        from hybridneus.report import write_report
+
+        path = write_report(run_dir)
+    except Exception as exc:  # whatever broke, the fit's work stands
+        log.warning("%s: report not written (%s: %s)", run_dir, type(exc).__name__, exc)
+        return
+    log.info("report: %s", path)
 
 
 def prepare(
@@ -190,9 +213,10 @@ def _fix_budget(trainer, logger, end: float) -> None:
     import time
 
     from hybridneus.training.budget import REPLAN_SHARE, BudgetPlan, budget_steps
+    from hybridneus.training.runlog import VIEWS
 
     t = trainer.cfg.train
-    overhead, save = 0.0, 0.0
+    overhead, save, finish = 0.0, 0.0, FINISH_SECONDS
     if logger is not None:
         tick = time.perf_counter()
         logger.checkpoint(trainer)
@@ -202,9 +226,11 @@ def _fix_budget(trainer, logger, end: float) -> None:
         if t.preview_every > 0:
             tick = time.perf_counter()
             logger.preview(trainer)
-            overhead += (time.perf_counter() - tick) / t.preview_every
-    # the final checkpoint, curve and record come after the last step
-    left = end - time.perf_counter() - 2.0 * save - FINISH_SECONDS
+            shot = time.perf_counter() - tick
+            overhead += shot / t.preview_every
+            finish += VIEWS * shot  # the report's view windows, rendered at the end
+    # the final checkpoint, curve, view windows and record come after the last step
+    left = end - time.perf_counter() - 2.0 * save - finish
     steps, how, costs = budget_steps(trainer, max(left, 0.0), overhead)
     if steps < MIN_BUDGET_STEPS:
         spent = t.minutes * 60.0 - (end - time.perf_counter())
@@ -213,7 +239,7 @@ def _fix_budget(trainer, logger, end: float) -> None:
                           "--iters")
     trainer.total_steps = trainer.record.steps = steps
     trainer.record.steps_from = how
-    trainer.deadline = end - save - FINISH_SECONDS
+    trainer.deadline = end - save - finish
     trainer.plan = BudgetPlan(costs, trainer.deadline, REPLAN_SHARE * max(left, 0.0),
                               clock=trainer.clock)
 

@@ -61,6 +61,32 @@ def simulate_device(out: Path, n_views: int, width: int, height: int, revolution
     return out
 
 
+def fit_with_previews(data: Path, out: Path, iters: int = 4, **kw):
+    """The tiny fit for ``iters`` steps with a preview every two (and the view windows at
+    its end): a run folder with everything a report shows."""
+    from hybridneus.api import fit
+    from hybridneus.config import apply_overrides, preset_config
+
+    short = [o for o in TINY_FIT if not o.startswith(("train.iters", "train.preview_every"))]
+    cfg = apply_overrides(preset_config("fast"), [*short, f"train.iters={iters}",
+                                                  "train.preview_every=2"])
+    return fit(data, cfg, out=out, device="cpu", **kw)
+
+
+def scanned_run(root: Path) -> Path:
+    """A run fitted a few steps, meshed at 32^3 with colour and scored by ``hybridneus eval``
+    (its ``eval.json`` and ``errors.png`` in the run folder): a report's every section."""
+    from hybridneus.cli.app import app
+
+    data = simulate_device(root / "device", 12, 24, 18, 1.0)
+    run = fit_with_previews(data, root / "runs").run_dir
+    for args in (["mesh", str(run), "--res", "32", "--color", "--device", "cpu"],
+                 ["eval", str(run / "mesh_32.ply"), str(data / "gt_mesh.ply"), "--samples",
+                  "2000", "--no-sdf"]):
+        app(args, standalone_mode=False)
+    return run
+
+
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory) -> Path:
     """The built-in device scene, 40 views at 48x36 (the training tests' scene)."""

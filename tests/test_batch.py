@@ -111,9 +111,16 @@ def test_a_failed_job_leaves_the_others_and_a_rerun_does_only_it(scans, tmp_path
     assert state["late"]["status"] == "failed"
     assert state["late"]["error"] == f"fit: {tmp_path / 'late'}: dataset folder does not exist"
     summary = (runs / "summary.csv").read_text().splitlines()
-    assert summary[0].startswith("job,status,steps,wall_s,chamfer,fscore,mesh,error")
+    assert summary[0].startswith("job,status,steps,wall_s,chamfer,fscore,mesh,report,error")
     assert summary[2].startswith("late,failed,") and "does not exist" in summary[2]
     assert "| good | done | 2 |" in (runs / "summary.md").read_text()
+    # each job's report (with its mesh and scores), linked from the batch's index page
+    report = Path(state["good"]["report"])
+    assert report.is_file() and "mesh-view" in report.read_text()
+    assert "Scores against the ground truth" in report.read_text()
+    index = (runs / "index.html").read_text()
+    assert f"href='{report.relative_to(runs)}'>good</a>" in index
+    assert "does not exist" in index and "1 done, 1 failed" in index
     # the data turns up: the same command runs the failed job only
     shutil.copytree(scans / "device", tmp_path / "late")
     proc = _batch(str(manifest), "--out", str(runs), "--workers", "2", "--threads", "1")

@@ -3,9 +3,9 @@ and ``eval``, each the ``hybridneus`` command in a process of its own, so that a
 out-of-memory kill takes only its job and every error is the command's own one-line message.
 
 A job's folder ``RUNS/<id>/`` holds ``data/`` (a converted recording), ``fit/`` (the fit's runs
-folder), ``fit.json`` (the run folder and steps of the fit once it ended), ``mesh.ply``,
-``eval.json``
-and ``job.log`` (every command and what it printed). Each step is skipped when its output is
+folder, with the run's ``report.html`` written last), ``fit.json`` (the run folder and steps of
+the fit once it ended), ``mesh.ply``, ``eval.json`` and ``errors.png``, and ``job.log`` (every
+command and what it printed). Each step is skipped when its output is
 already there, and an interrupted fit (a run folder with a checkpoint, no ``fit.json``) is
 resumed with ``fit --resume``: running a job again finishes it rather than starting it over.
 """
@@ -91,10 +91,11 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
     run, ended = fit_run(folder)
     if ended is None:
         if run is not None:
-            out = step("fit", "--resume", str(run), "--device", job.device, "--quiet")
+            out = step("fit", "--resume", str(run), "--device", job.device, "--quiet",
+                       "--no-report")
         else:
             args = [str(data), "--preset", job.preset, "--out", str(fit_root), "--seed",
-                    str(job.seed), "--device", job.device, "--quiet"]
+                    str(job.seed), "--device", job.device, "--quiet", "--no-report"]
             if job.iters is not None:
                 args += ["--iters", str(job.iters)]
             if job.minutes is not None:
@@ -121,13 +122,30 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
         if job.gt is not None:
             scores = folder / "eval.json"
             if not scores.is_file():
-                text = step("eval", str(mesh), job.gt, "--json")
+                text = step("eval", str(mesh), job.gt, "--json", "--errors",
+                            str(folder / "errors.png"))
                 with atomic_path(scores) as tmp:
                     tmp.write_text(text)
             result = json.loads(scores.read_text())
             record |= {"chamfer": result["chamfer"], "fscore": result["fscore"]}
+    report, args = run / "report.html", [str(run)]
+    if "mesh" in record:
+        args += ["--mesh", record["mesh"]]
+    if (folder / "eval.json").is_file():
+        args += ["--eval", str(folder / "eval.json")]
+    if not _newer(report, [run / "metrics.csv", *map(Path, args[2::2])]):
+        step("report", *args)
+    record["report"] = str(report)
     record["wall_s"] = round(time.perf_counter() - t0, 1)
     return record
+
+
+def _newer(path: Path, sources: list[Path]) -> bool:
+    """Whether ``path`` exists and is newer than each of ``sources`` that exists."""
+    if not path.is_file():
+        return False
+    made = path.stat().st_mtime
+    return all(made >= p.stat().st_mtime for p in sources if p.is_file())
 
 
 def _command(name: str, args: list[str], log: Path, threads: int,

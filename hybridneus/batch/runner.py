@@ -1,5 +1,6 @@
 """A whole batch: the manifest's jobs that are not done yet, on an executor, with the state
-file kept current, a progress bar, and the summary written at the end (also after a Ctrl-C).
+file kept current, a progress bar, and the summary and index page written at the end (also
+after a Ctrl-C).
 """
 
 from __future__ import annotations
@@ -8,13 +9,20 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hybridneus.batch.executors import EXECUTORS
 from hybridneus.batch.state import BatchState
-from hybridneus.batch.summary import rows, write_summary
+from hybridneus.batch.summary import COLUMNS, rows, write_summary
 from hybridneus.errors import ConfigError
+from hybridneus.report.index import write_index
+
+if TYPE_CHECKING:
+    from hybridneus.batch.executors import LocalExecutor, RayExecutor, SlurmExecutor
+
+    Executor = LocalExecutor | RayExecutor | SlurmExecutor
 
 
 def gpu_count() -> int:
@@ -48,8 +56,9 @@ def make_executor(name: str, runs: Path, workers: int, threads: int, options: di
     raise ConfigError(f"--executor {name}: expected one of {', '.join(EXECUTORS)}")
 
 
-def run_batch(jobs: list, runs: str | Path, executor, progress: bool = True,
-              on_done=None) -> list[dict[str, Any]]:
+def run_batch(jobs: list, runs: str | Path, executor: Executor, progress: bool = True,
+              on_done: Callable[[str, dict[str, Any]], None] | None = None
+              ) -> list[dict[str, Any]]:
     """Run the jobs of ``jobs`` that ``runs``' state does not list as done; return the
     summary's rows (every job of ``jobs``).
 
@@ -112,6 +121,7 @@ def run_batch(jobs: list, runs: str | Path, executor, progress: bool = True,
         finally:
             table = rows(ids, state.jobs)
             write_summary(runs, table)
+            write_index(runs, table, COLUMNS)
     return table
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 from hybridneus.fileio import atomic_path
 
-COLUMNS = ("job", "status", "steps", "wall_s", "chamfer", "fscore", "mesh", "error")
+COLUMNS = ("job", "status", "steps", "wall_s", "chamfer", "fscore", "mesh", "report", "error")
 
 
 def rows(ids: list[str], jobs: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
@@ -20,7 +20,7 @@ def rows(ids: list[str], jobs: dict[str, dict[str, Any]]) -> list[dict[str, Any]
         out.append({"job": i, "status": r["status"], "steps": r.get("steps"),
                     "wall_s": r.get("wall_s"), "chamfer": r.get("chamfer"),
                     "fscore": r.get("fscore"), "mesh": r.get("mesh"),
-                    "error": r.get("error")})
+                    "report": r.get("report"), "error": r.get("error")})
     return out
 
 

@@ -16,6 +16,8 @@ from hybridneus.training import runs
 
 #: The training poses of a run that smoothed its track (see :meth:`RunLogger.save_poses`).
 POSES = "poses_refined.npz"
+#: Views whose windows the end of a fit renders for its report (``previews/view_<i>.png``).
+VIEWS = 4
 _FIXED = ["step", "elapsed_s", "loss/total", "loss/event", "loss/eikonal"]
 
 
@@ -140,6 +142,18 @@ class RunLogger:
         write_preview(trainer, self.run_dir / "previews" / f"step_{trainer.step:07d}.png")
         write_curve(self.history, self.run_dir / "previews" / "curve.png")
 
+    def views(self, trainer, n: int = VIEWS) -> list[Path]:
+        """``previews/view_<i>.png``: the window preview (:func:`write_preview`) of ``n``
+        views spread over the sequence, for the run's report."""
+        from hybridneus.training.previews import write_preview
+
+        last = trainer.split.n_views - 1
+        picks = sorted({round(last * (k + 0.5) / n) for k in range(n)})
+        paths = [self.run_dir / "previews" / f"view_{i:05d}.png" for i in picks]
+        for i, path in zip(picks, paths, strict=True):
+            write_preview(trainer, path, view=i)
+        return paths
+
     def finish(self, trainer) -> None:
         """Final checkpoint, curve and (if any) preview; close TensorBoard. ``scene.yaml`` is
         written again: a budgeted fit may have re-planned its length, and one stopped at its
@@ -159,6 +173,8 @@ class RunLogger:
             from hybridneus.training.previews import write_curve
 
             write_curve(self.history, self.run_dir / "previews" / "curve.png")
+        if not trainer.interrupted and trainer.cfg.train.preview_every > 0:
+            self.views(trainer)
         if self.tb is not None:
             self.tb.flush()
             self.tb.close()

@@ -16,7 +16,7 @@ import os
 import shutil
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -24,6 +24,9 @@ import torch
 from hybridneus.config import Config, load_config
 from hybridneus.errors import ConfigError, RunError
 from hybridneus.fileio import atomic_path, creation_fault
+
+if TYPE_CHECKING:
+    from hybridneus.model.field import HybridField
 
 CHECKPOINT = Path("checkpoints") / "last.pt"
 #: The checkpoint before the last one: read when the last is missing or unreadable.
@@ -221,7 +224,7 @@ def _resolve_run(run_dir: str | os.PathLike) -> Path:
 
 def load_field(
     run_dir: str | os.PathLike, device: str = "auto", checkpoint: dict[str, Any] | None = None
-):
+) -> HybridField:
     """Load the trained field of a run folder, in eval mode, on ``device``.
 
     Args:

@@ -1,0 +1,93 @@
+"""The run report: what ``report.html`` holds, when a fit writes it, and its refusals."""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from pathlib import Path
+
+import pytest
+from conftest import fit_with_previews, scanned_run, simulate_device
+
+
+@pytest.fixture(scope="module")
+def scanned(tmp_path_factory) -> Path:
+    return scanned_run(tmp_path_factory.mktemp("report"))
+
+
+def test_a_fit_writes_a_report_that_opens_with_no_network(scanned, run_cli):
+    code, out, err = run_cli("report", str(scanned))
+    assert code == 0, err
+    html = (scanned / "report.html").read_text()
+    # one file: plotly's script inside the head, no address the page itself would fetch
+    head, body = html.split("</head>", 1)
+    assert "<script src" not in html and "<link" not in head and "plotly.js v" in head
+    assert not re.search(r"(src|href)=['\"]https?://", body)
+    assert "Plotly.newPlot" in body and len(head) > 1_000_000
+    for div in ("curves", "mesh-view"):
+        assert f'id="{div}"' in html
+    for key in ("loss/event", "loss/eikonal", "inv_s", "step_seconds", "lr"):
+        assert '"name":"{}"'.format(key.replace("/", "\\u002f")) in html  # plotly's JSON
+    # what the fit estimated, and the config keys changed from the preset
+    assert "contrast threshold C" in html and "train.iters" in html and "grid.n_levels" in html
+    # event windows beside renders at the end, step previews, the scores and error picture
+    assert len(list((scanned / "previews").glob("view_*.png"))) == 4
+    assert html.count("data:image/png;base64,") >= 4 + 2 + 1
+    scores = json.loads((scanned / "eval.json").read_text())
+    assert f"{scores['chamfer']:.5g}" in html and (scanned / "errors.png").is_file()
+    assert "errors.png" in scores["errors"]
+
+
+def test_the_report_names_the_files_it_shows(scanned, tmp_path, run_cli):
+    other = tmp_path / "elsewhere.html"
+    code, out, err = run_cli("report", str(scanned), "--out", str(other))
+    assert code == 0, err and other.is_file()
+    assert "mesh_32.ply" in other.read_text() and f"{other}" in out
+
+
+@pytest.mark.parametrize("make,message", [
+    (lambda p: p.mkdir(), "not a run folder (no config.yaml)"),
+    (lambda p: None, "run folder does not exist"),
+])
+def test_report_of_what_is_not_a_run_is_one_line(tmp_path, run_cli, make, message):
+    path = tmp_path / "nothing"
+    make(path)
+    code, out, err = run_cli("report", str(path))
+    assert code == 2 and err.strip() == f"error: {path}: {message}"
+
+
+def test_report_refuses_a_scores_file_of_another_kind(scanned, tmp_path, run_cli):
+    bad = tmp_path / "scores.json"
+    bad.write_text('{"steps": 3}')
+    code, out, err = run_cli("report", str(scanned), "--eval", str(bad))
+    assert code == 2 and err.strip() == f"error: {bad}: not a record of hybridneus eval " \
+                                        "(no chamfer)"
+    assert not list(tmp_path.glob(".*.tmp.html"))
+
+
+def test_no_report_skips_it_and_a_resume_refreshes_it(tmp_path, run_cli):
+    data = simulate_device(tmp_path / "device", 12, 24, 18, 1.0)
+    run = fit_with_previews(data, tmp_path / "runs", iters=2, report=False).run_dir
+    assert not (run / "report.html").exists()
+    code, out, err = run_cli("fit", "--resume", str(run), "--iters", "4", "--quiet")
+    assert code == 0, err
+    html = (run / "report.html").read_text()
+    assert "4 of 4 steps" in html
+    code, out, err = run_cli("fit", "--resume", str(run), "--iters", "6", "--quiet",
+                             "--no-report")
+    assert code == 0 and "4 of 4 steps" in (run / "report.html").read_text()
+
+
+def test_a_report_that_fails_is_a_warning_and_the_fit_stands(tmp_path, monkeypatch, caplog):
+    import hybridneus.report
+
+    def broken(run_dir):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(hybridneus.report, "write_report", broken)
+    data = simulate_device(tmp_path / "device", 12, 24, 18, 1.0)
+    with caplog.at_level(logging.WARNING, logger="hybridneus"):
+        field = fit_with_previews(data, tmp_path / "runs", iters=2)
+    assert field.trainer_step == 2 and (field.run_dir / "checkpoints" / "last.pt").is_file()
+    assert "report not written (OSError: disk full)" in caplog.text
