@@ -93,8 +93,10 @@ def main() -> None:
     views = check_page(path, args.images / "report-views.png", selector="#views",
                        height=1400)
     site = args.cache / "site"
-    subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(site)],
-                   cwd=common.REPO, check=True, capture_output=True)
+    built = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d",
+                            str(site)], cwd=common.REPO, capture_output=True, text=True)
+    if built.returncode != 0:
+        raise SystemExit(f"mkdocs build --strict: {built.stderr.strip()[-1500:]}")
     front = check_page(site / "index.html", args.images / "site.png")
 
     import json

@@ -639,7 +639,44 @@ def other_cases() -> list[Case]:
         Case(sim, "demo --minutes -1", lambda ws, d: ["demo", "--out", "demo", "--minutes",
                                                       "-1"], sees="minutes"),
     ]
-    return info + simulate + batch_cases()
+    return info + simulate + batch_cases() + report_cases()
+
+
+def report_cases() -> list[Case]:
+    def case(what: str, prepare, sees: str, expect: str = "error", check=None) -> Case:
+        return Case("report", what, prepare, expect, sees, check)
+
+    def garbled_metrics(ws: Workspace, d: Path) -> list[str]:
+        run = copy_run(ws, d)
+        (run / "metrics.csv").write_text("step,loss/total\n1,abc\n\x00\x01,2,3\n")
+        return ["report", str(run)]
+
+    def written(d: Path) -> str | None:
+        pages = list((d / "runs").glob("*/report.html"))
+        return None if pages and pages[0].stat().st_size > 10**6 else "no report.html"
+
+    def scores(text: str):
+        def make(ws: Workspace, d: Path) -> list[str]:
+            (d / "s.json").write_text(text)
+            return ["report", str(ws.run), "--eval", str(d / "s.json"), "--out", "r.html"]
+        return make
+
+    return [
+        case("report of a missing folder", lambda ws, d: ["report", str(d / "nope")], "nope"),
+        case("report of a folder that is not a run",
+             lambda ws, d: (d / "x").mkdir() or ["report", str(d / "x")], "not a run folder"),
+        case("report --mesh missing", lambda ws, d: [
+            "report", str(ws.run), "--mesh", str(d / "nope.ply"), "--out", "r.html"],
+             "nope.ply"),
+        case("report --mesh of garbage", lambda ws, d: (d / "g.ply").write_text("garbage") and [
+            "report", str(ws.run), "--mesh", str(d / "g.ply"), "--out", "r.html"], "g.ply"),
+        case("report --eval not eval's", scores('{"steps": 3}'), "s.json"),
+        case("report --eval of garbage", scores("not json"), "s.json"),
+        case("report --out is a folder", lambda ws, d: (d / "o").mkdir() or [
+            "report", str(ws.run), "--out", str(d / "o")], "is a folder"),
+        case("report of a run with a garbled metrics.csv", garbled_metrics, "",
+             expect="recover", check=written),
+    ]
 
 
 def _manifest(content: str) -> Callable[[Workspace, Path], Path]:

@@ -747,6 +747,37 @@ def batch_section(rows: list[dict]) -> list[str]:
     return out + _command_lines(rows + killed)
 
 
+def report_section(rows: list[dict]) -> list[str]:
+    """bench_report.py: the run report of a real fit, its size and write time."""
+    if not rows:
+        return []
+    out = ["## Run report", "",
+           "A shared asset simulated as the suite simulates it, fitted for the given minutes, "
+           "meshed at 300 with colour and scored; then `hybridneus report` timed as a command "
+           "(Python's start and imports included) and `write_report` in a warm process "
+           "(medians of 3), and the page opened in headless Chromium by the browser tests' own "
+           "code (`benchmarks/browser.py`): script errors and requests for anything but the "
+           "file itself, whether the curves and the 3D view drew (the pixel spread of the "
+           "view; a blank canvas is 0).", "",
+           "| scene | fit | steps | CD | mesh faces (shown) | size, MB | write, s: command / "
+           "warm | browser errors | 3D view spread | commit | machine | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        m, b = r.get("machine", {}), r["browser"]
+        out.append(f"| {r['scene']} | {r['minutes']:g} min | {r['steps']} | "
+                   f"{_f(r['chamfer'])} | {r['mesh_faces']:,} ({r['shown_faces']:,}) | "
+                   f"{r['size_mb']:.1f} | {r['write_s_command']:.1f} / {r['write_s']:.2f} | "
+                   f"{len(b['errors']) + len(b['site_errors'])} | {b['canvas_std']:g} | "
+                   f"{r['commit']} | {m.get('cpu', '-')}, {m.get('cores', '-')} cores | "
+                   f"{r['date'][:10]} |")
+    out += ["", "The newest line's report, top of the page and its event windows, and the "
+            "documentation site's front page, as the browser test saw them:", "",
+            "![The top of the report](images/report.png)", "",
+            "![Event windows beside renders](images/report-views.png)", "",
+            "![The site's front page](images/site.png)"]
+    return out + _command_lines(rows)
+
+
 def capture_section(rows: list[dict]) -> list[str]:
     """bench_capture.py: a noisy recording with a messy track, converted and fitted."""
     if not rows:
@@ -937,6 +968,7 @@ def build(compare: list[tuple[str, str]], same_as: list[tuple[str, str]] | tuple
     out += frames_section(results.get("frames", []))
     out += capture_section(results.get("capture", []))
     out += batch_section(results.get("batch", []))
+    out += report_section(results.get("report", []))
     out += budget_section(results.get("budget", []))
     out += busy_tests_section(results.get("busy_tests", []))
     out += reliability_section(results.get("reliability", []))
