@@ -91,3 +91,21 @@ def test_a_report_that_fails_is_a_warning_and_the_fit_stands(tmp_path, monkeypat
         field = fit_with_previews(data, tmp_path / "runs", iters=2)
     assert field.trainer_step == 2 and (field.run_dir / "checkpoints" / "last.pt").is_file()
     assert "report not written (OSError: disk full)" in caplog.text
+
+
+def test_a_large_mesh_is_shown_reduced_with_its_colours_and_its_shape():
+    import numpy as np
+    import trimesh
+
+    from hybridneus.report.figures import viewer_mesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=6)  # 81,920 faces
+    red = np.tile([200, 30, 30, 255], (len(sphere.vertices), 1)).astype(np.uint8)
+    sphere.visual.vertex_colors = red
+    shown = viewer_mesh(sphere, 8000)
+    assert 4000 < len(shown.faces) <= 9600
+    assert shown.visual.kind == "vertex"
+    assert np.abs(shown.visual.vertex_colors[:, :3].astype(int) - [200, 30, 30]).max() <= 1
+    radius = np.linalg.norm(shown.vertices, axis=1)
+    assert np.abs(radius - 1.0).max() < 0.02 and np.allclose(shown.bounds, sphere.bounds,
+                                                                 atol=0.02)

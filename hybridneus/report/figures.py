@@ -68,8 +68,8 @@ def curves_figure(metrics: dict[str, list[float]]):
 
 
 def mesh_figure(path: str | Path, max_faces: int = VIEWER_FACES):
-    """An interactive view of a mesh file with its vertex colours (grey without), decimated
-    to about ``max_faces`` faces (:func:`hybridneus.meshing.postprocess.decimate_mesh`).
+    """An interactive view of a mesh file with its vertex colours (grey without), reduced to
+    about ``max_faces`` faces (:func:`viewer_mesh`).
 
     Returns:
         ``(figure, faces shown, faces in the file)``.
@@ -77,12 +77,11 @@ def mesh_figure(path: str | Path, max_faces: int = VIEWER_FACES):
     import plotly.graph_objects as go
 
     from hybridneus.meshing import load_mesh
-    from hybridneus.meshing.postprocess import decimate_mesh
 
     mesh = load_mesh(path)
     n_file = len(mesh.faces)
     if n_file > max_faces:
-        mesh = decimate_mesh(mesh, max_faces)
+        mesh = viewer_mesh(mesh, max_faces)
     v = np.asarray(mesh.vertices, dtype=np.float64)
     f = np.asarray(mesh.faces, dtype=np.int64)
     colours = None
@@ -106,4 +105,32 @@ def mesh_figure(path: str | Path, max_faces: int = VIEWER_FACES):
     return fig, len(f), n_file
 
 
-__all__ = ["VIEWER_FACES", "curves_figure", "mesh_figure"]
+def viewer_mesh(mesh, max_faces: int):
+    """``mesh`` (a trimesh, vertex colours kept) with at most about ``max_faces`` faces, fast
+    enough for a report: vertex clustering on a grid whose cell gives about that many faces
+    for the mesh's area (2.5 faces a cell crossed, as measured on spheres and scans), then
+    quadric decimation
+    (:func:`hybridneus.meshing.postprocess.decimate_mesh`) of what is still over. Quadric
+    decimation alone of a 300^3 mesh takes seconds; clustering a tenth of that, and at this
+    size the two are alike to the eye."""
+    import pymeshlab
+
+    from hybridneus.meshing.postprocess import (
+        _from_meshset,
+        _to_meshset,
+        _vertex_colors,
+        decimate_mesh,
+    )
+
+    colours = _vertex_colors(mesh)
+    ms = _to_meshset(mesh, colours)
+    cell = math.sqrt(2.5 * float(mesh.area) / max_faces)
+    ms.meshing_decimation_clustering(threshold=pymeshlab.PureValue(cell))
+    ms.meshing_remove_unreferenced_vertices()
+    out = _from_meshset(ms, colours is not None)
+    if len(out.faces) > 1.2 * max_faces:
+        out = decimate_mesh(out, max_faces)
+    return out
+
+
+__all__ = ["VIEWER_FACES", "curves_figure", "mesh_figure", "viewer_mesh"]
