@@ -97,7 +97,8 @@ def main() -> None:
                             str(site)], cwd=common.REPO, capture_output=True, text=True)
     if built.returncode != 0:
         raise SystemExit(f"mkdocs build --strict: {built.stderr.strip()[-1500:]}")
-    front = check_page(site / "index.html", args.images / "site.png")
+    # wide enough for the site's navigation column, which narrower windows fold away
+    front = check_page(site / "index.html", args.images / "site.png", width=1400)
 
     import json
 

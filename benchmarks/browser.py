@@ -80,6 +80,8 @@ def check_page(path: str | Path, screenshot: str | Path | None = None,
                 if selector is not None:
                     page.query_selector(selector).screenshot(path=str(screenshot))
                 else:
+                    page.evaluate("window.scrollTo(0, 0)")  # measuring a view scrolled to it
+                    page.wait_for_timeout(300)
                     page.screenshot(path=str(screenshot))
         finally:
             browser.close()

@@ -73,10 +73,16 @@ def fmt(value: Any) -> str:
     return str(value)
 
 
-def picture(path: Path, caption: str = "", width: int | None = None) -> str:
-    """A PNG from disk inlined as a data URI, with its caption."""
+def picture(path: Path, caption: str = "", scale: float = 1.0) -> str:
+    """A PNG from disk inlined as a data URI, shown ``scale`` times its size, with its
+    caption."""
     data = base64.b64encode(path.read_bytes()).decode("ascii")
-    size = f" width='{width}'" if width else ""
+    size = ""
+    if scale != 1.0:
+        from PIL import Image
+
+        with Image.open(path) as img:
+            size = f" width='{round(img.width * scale)}'"
     cap = f"<figcaption>{esc(caption)}</figcaption>" if caption else ""
     return (f"<figure><img alt='{esc(caption or path.name)}'{size} "
             f"src='data:image/png;base64,{data}'>{cap}</figure>")

@@ -107,10 +107,11 @@ def render(content: RunContent) -> str:
             page.paragraph("Each: the rendered log-brightness change over an event window, the "
                            "recorded C * E of the same window, the colour and the normals of "
                            "the view at the window's end.", "note"),
-            *(page.picture(p, p.stem.replace("_", " ")) for p in content.views)]))
+            *(page.picture(p, p.stem.replace("_", " "), 2.0) for p in content.views)]))
     if content.previews:
         body.append(page.section("Step previews", "previews", [
-            page.picture(p, f"step {int(p.stem.split('_')[-1])}") for p in content.previews]))
+            page.picture(p, f"step {int(p.stem.split('_')[-1])}", 2.0)
+            for p in content.previews]))
     for title, path in content.pictures.items():
         body.append(page.section(title, path.stem, [page.picture(path)]))
     return page.document(f"hybridneus report: {content.run.name}", body, get_plotlyjs())
