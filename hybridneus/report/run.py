@@ -72,9 +72,12 @@ def render(content: RunContent) -> str:
     scene = content.scene
     steps = content.metrics.get("step") or [0]
     stamp = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M")
+    planned = scene.get("steps", "?")
+    done = f"stopped at step {scene['stopped_at']} of {planned}" if scene.get("stopped_at") \
+        else f"{planned} steps"
     body = [f"<h1>{page.esc(content.run.name)}</h1>",
-            page.paragraph(f"preset {content.preset}, {int(steps[-1])} of "
-                           f"{scene.get('steps', '?')} steps; report written {stamp}", "meta")]
+            page.paragraph(f"preset {content.preset}, {done}, logged to step "
+                           f"{int(steps[-1])}; report written {stamp}", "meta")]
     if content.scores is not None:
         parts = [page.table(["metric", "value"], _score_rows(content.scores))]
         if content.errors is not None:
