@@ -77,6 +77,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--variation", type=float, default=1.0)
     ap.add_argument("--offset", type=float, default=0.04, help="pose clock - event clock, s")
+    ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                    help="a config override for the fits of the converted recording "
+                    "(converted, told), to find where a gap comes from (the line keeps it)")
     ap.add_argument("--fits", nargs="+", default=["clean", "converted"],
                     choices=["clean", "converted", "noisy", "told"])
     common.add_arguments(ap, "capture")
@@ -133,6 +136,8 @@ def main() -> None:
             "duration_s": args.duration, "variation": args.variation,
             "offset_s": args.offset, "track": mess, "convert_s": convert_s,
             "convert_stderr": proc.stderr.strip().splitlines()}
+    if args.sets:
+        line["sets"] = list(args.sets)
     if proc.returncode != 0:
         line["refused"] = proc.stderr.strip()
         common.append(args.out, line)
@@ -159,7 +164,8 @@ def main() -> None:
     for label in args.fits:
         folder, back = runs[label]
         try:
-            run_dir = fit(args, f"{name}-{label}", folder)
+            sets = tuple(args.sets) if label in ("converted", "told") else ()
+            run_dir = fit(args, f"{name}-{label}", folder, sets)
         except subprocess.CalledProcessError as exc:  # the fit's own error is on stderr
             line[f"failed_{label}"] = f"the fit failed (exit {exc.returncode})"
             print(f"[capture] {label}: the fit failed", file=sys.stderr, flush=True)

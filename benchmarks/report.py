@@ -801,7 +801,8 @@ def capture_section(rows: list[dict]) -> list[str]:
                        f"- | {r['commit']} | {r['date'][:10]} |")
             continue
         t = r["track"]
-        out.append(f"| {r['scene']} | {r['duration_s']:g}, {r['variation']:g} | {r['seed']} | "
+        scene = r["scene"] + "".join(f" (converted fits: {v})" for v in r.get("sets", []))
+        out.append(f"| {scene} | {r['duration_s']:g}, {r['variation']:g} | {r['seed']} | "
                    f"{r['iters']} | {r['clock_error_ms']:+.1f} ({r['clock_sigma_ms']:.1f}) | "
                    f"{r['hot_pixels']} | {t['occluded']} + {t['repeated']} | "
                    f"{_f(r.get('chamfer_clean'))} | {_f(r.get('chamfer_converted'))} | "
