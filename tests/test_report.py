@@ -109,3 +109,30 @@ def test_a_large_mesh_is_shown_reduced_with_its_colours_and_its_shape():
     radius = np.linalg.norm(shown.vertices, axis=1)
     assert np.abs(radius - 1.0).max() < 0.02 and np.allclose(shown.bounds, sphere.bounds,
                                                                  atol=0.02)
+
+
+GARBLED = ("step,elapsed_s,loss/total\n1,0.1,2.0\n2,0.2,1.5\n"
+           "3,0.3,1.43,0.4,1.2\n"  # a row cut short and the next run into it
+           "4,0.4\n"  # a row cut short
+           "5,0.5,1.1\n")
+
+
+def test_metrics_written_by_a_killed_fit_read_with_the_broken_rows_blank(tmp_path):
+    from hybridneus.report.content import read_metrics
+
+    (tmp_path / "metrics.csv").write_text(GARBLED)
+    m = read_metrics(tmp_path / "metrics.csv")
+    assert list(m) == ["step", "elapsed_s", "loss/total"]
+    assert m["step"] == [1, 2, 3, 4, 5] and m["loss/total"][:2] == [2.0, 1.5]
+    assert m["loss/total"][4] == 1.1 and m["loss/total"][3] != m["loss/total"][3]  # NaN
+
+
+def test_a_resumed_fit_drops_the_rows_a_killed_write_broke(tmp_path):
+    from hybridneus.training.runlog import RunLogger
+
+    (tmp_path / "metrics.csv").write_text(GARBLED)
+    logger = RunLogger(tmp_path, None, resume_step=5)
+    assert [r["step"] for r in logger.history] == [1, 2, 5]
+    assert logger.columns == ["step", "elapsed_s", "loss/total"]
+    assert (tmp_path / "metrics.csv").read_text().splitlines()[1:] == ["1,0.1,2", "2,0.2,1.5",
+                                                                       "5,0.5,1.1"]

@@ -13,6 +13,7 @@ resumed with ``fit --resume``: running a job again finishes it rather than start
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import signal
@@ -134,8 +135,14 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
     if (folder / "eval.json").is_file():
         args += ["--eval", str(folder / "eval.json")]
     if not _newer(report, [run / "metrics.csv", *map(Path, args[2::2])]):
-        step("report", *args)
-    record["report"] = str(report)
+        try:
+            step("report", *args)
+        except JobFailed as exc:  # a page not written takes nothing from the job's results
+            with open(log, "a") as f:
+                f.write(f"warning: {exc}\n")
+            logging.getLogger("hybridneus").warning("%s: %s", job.id, exc)
+    if report.is_file():
+        record["report"] = str(report)
     record["wall_s"] = round(time.perf_counter() - t0, 1)
     return record
 

@@ -108,7 +108,9 @@ def read_metrics(path: Path) -> dict[str, list[float]]:
         rows = list(csv.DictReader(fh))
     if not rows:
         return {}
-    columns: dict[str, list[float]] = {k: [] for k in rows[0]}
+    # a row cut or run together by a killed write has too few cells (None) or too many
+    # (a list under the key None): its cells read as missing
+    columns: dict[str, list[float]] = {k: [] for k in rows[0] if k is not None}
     for row in rows:
         for key in columns:
             columns[key].append(_number(row.get(key)))
@@ -172,8 +174,10 @@ def _yaml(path: Path) -> dict[str, Any]:
 
 
 def _number(text: str | None) -> float:
+    if not isinstance(text, str) or not text:
+        return math.nan
     try:
-        return float(text) if text not in (None, "") else math.nan
+        return float(text)
     except ValueError:
         return math.nan
 

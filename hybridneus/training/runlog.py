@@ -46,14 +46,18 @@ class RunLogger:
         with open(self.metrics_path, newline="") as fh:
             rows = list(csv.DictReader(fh))
         for row in rows:
+            # a row a killed write cut short or ran into the next is dropped: cells missing
+            # (None) or too many (a list under the key None)
+            if None in row or any(v is None for v in row.values()):
+                continue
             try:
-                values = {k: float(v) for k, v in row.items() if v not in ("", None)}
+                values = {k: float(v) for k, v in row.items() if v != ""}
             except ValueError:
                 continue
             if values.get("step", 0) <= resume_step:
                 self.history.append(values)
         if rows:
-            self.columns = list(rows[0].keys())
+            self.columns = [k for k in rows[0] if k is not None]
         self._rewrite_metrics()
 
     def _rewrite_metrics(self) -> None:
