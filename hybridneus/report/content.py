@@ -9,6 +9,7 @@ report of a fit stopped at its first step shows what there is.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -104,8 +105,7 @@ def read_metrics(path: Path) -> dict[str, list[float]]:
     """``metrics.csv`` as ``{column: values}``; empty when the file is missing or empty."""
     if not path.is_file():
         return {}
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = list(csv.DictReader(io.StringIO(metrics_text(path))))
     if not rows:
         return {}
     # a row cut or run together by a killed write has too few cells (None) or too many
@@ -115,6 +115,12 @@ def read_metrics(path: Path) -> dict[str, list[float]]:
         for key in columns:
             columns[key].append(_number(row.get(key)))
     return columns
+
+
+def metrics_text(path: Path) -> str:
+    """``metrics.csv``'s text, without what a crash can leave in it: NUL bytes (a file
+    system that grew the file before the power went) and bytes that are not UTF-8."""
+    return path.read_bytes().decode("utf-8", errors="replace").replace("\x00", "")
 
 
 def config_changes(path: Path) -> tuple[str, list[tuple[str, Any, Any]]]:
@@ -197,5 +203,5 @@ def _paired(a: dict[str, Any], b: dict[str, Any]) -> dict[str, tuple[Any, Any]]:
     return {k: (a.get(k), b.get(k)) for k in sorted(set(a) | set(b))}
 
 
-__all__ = ["MAX_PREVIEWS", "SCORES", "RunContent", "config_changes", "newest_mesh",
-           "read_metrics", "read_run", "read_scores", "spread"]
+__all__ = ["MAX_PREVIEWS", "SCORES", "RunContent", "config_changes", "metrics_text",
+           "newest_mesh", "read_metrics", "read_run", "read_scores", "spread"]

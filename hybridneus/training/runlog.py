@@ -43,8 +43,8 @@ class RunLogger:
     def _load_metrics(self, resume_step: int) -> None:
         if not self.metrics_path.is_file():
             return
-        with open(self.metrics_path, newline="") as fh:
-            rows = list(csv.DictReader(fh))
+        text = self.metrics_path.read_bytes().decode("utf-8", errors="replace")
+        rows = list(csv.DictReader(io.StringIO(text.replace("\x00", ""))))  # NULs: a crash
         for row in rows:
             # a row a killed write cut short or ran into the next is dropped: cells missing
             # (None) or too many (a list under the key None)
