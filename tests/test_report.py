@@ -119,13 +119,18 @@ GARBLED = ("step,elapsed_s,loss/total\n1,0.1,2.0\n2,0.2,1.5\n"
 
 
 def test_metrics_written_by_a_killed_fit_read_with_the_broken_rows_blank(tmp_path):
-    from hybridneus.report.content import read_metrics
+    from hybridneus.report.content import RunContent, read_metrics
 
     (tmp_path / "metrics.csv").write_text(GARBLED)
     m = read_metrics(tmp_path / "metrics.csv")
     assert list(m) == ["step", "elapsed_s", "loss/total"]
     assert m["step"] == [1, 2, 3, 4, 5] and m["loss/total"][:2] == [2.0, 1.5]
     assert m["loss/total"][4] == 1.1 and m["loss/total"][3] != m["loss/total"][3]  # NaN
+    (tmp_path / "metrics.csv").write_text("step,loss/total\n1,2.0\nx\x00y,1.5\n")
+    from hybridneus.report.run import render
+
+    content = RunContent(run=tmp_path, metrics=read_metrics(tmp_path / "metrics.csv"))
+    assert "logged to step 1;" in render(content)  # a step that is not a number is skipped
 
 
 def test_a_resumed_fit_drops_the_rows_a_killed_write_broke(tmp_path):

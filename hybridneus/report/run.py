@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -70,14 +71,14 @@ def render(content: RunContent) -> str:
     from hybridneus.report.figures import curves_figure, mesh_figure
 
     scene = content.scene
-    steps = content.metrics.get("step") or [0]
+    logged = [s for s in content.metrics.get("step", []) if math.isfinite(s)] or [0]
     stamp = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M")
     planned = scene.get("steps", "?")
     done = f"stopped at step {scene['stopped_at']} of {planned}" if scene.get("stopped_at") \
         else f"{planned} steps"
     body = [f"<h1>{page.esc(content.run.name)}</h1>",
             page.paragraph(f"preset {content.preset}, {done}, logged to step "
-                           f"{int(steps[-1])}; report written {stamp}", "meta")]
+                           f"{int(max(logged))}; report written {stamp}", "meta")]
     if content.scores is not None:
         parts = [page.table(["metric", "value"], _score_rows(content.scores))]
         if content.errors is not None:
