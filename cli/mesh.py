@@ -103,7 +103,13 @@ def mesh(
     from hybridneus.meshing import MESH_FORMATS, CropVolume, PostprocessOptions, save_mesh
     from hybridneus.meshing.extract import ExtractionStats, extract_mesh
     from hybridneus.meshing.render import save_preview
-    from hybridneus.training.runs import latest_run, load_cameras, load_checkpoint, load_field
+    from hybridneus.training.runs import (
+        latest_run,
+        load_cameras,
+        load_checkpoint,
+        load_field,
+        resolve_run,
+    )
 
     suffix = Path(out).suffix.lstrip(".").lower() if out is not None else ""
     fmt = (format or suffix or "ply").lower()
@@ -125,9 +131,7 @@ def mesh(
         from hybridneus.fileio import check_output
 
         check_output(out)  # before minutes of meshing, not after
-    run_dir = Path(run) if run is not None else latest_run(runs_root)
-    if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
-        run_dir = latest_run(run_dir)  # a runs root was given: use its latest run
+    run_dir = resolve_run(run) if run is not None else latest_run(runs_root)
     state = load_checkpoint(run_dir)  # read once: the field and the cameras are both in it
     field = load_field(run_dir, device=device, checkpoint=state)
     fill = fill_unseen and not no_postprocess

@@ -177,15 +177,13 @@ def render(
     event frames next to the field's predicted log-brightness changes."""
     from hybridneus.data import load_dataset
     from hybridneus.errors import ConfigError
-    from hybridneus.training.runs import latest_run, load_field, load_run_config
+    from hybridneus.training.runs import latest_run, load_field, load_run_config, resolve_run
 
     if views not in VIEW_KINDS:
         raise ConfigError(f"--views {views}: expected one of {', '.join(VIEW_KINDS)}")
     if max_views < 1 or stride < 1 or frames < 1 or windows < 1 or size < 16:
         raise ConfigError("--max-views/--stride/--frames/--windows must be >= 1, --size >= 16")
-    run_dir = Path(run) if run is not None else latest_run(runs_root)
-    if (run_dir / "latest").is_file() and not (run_dir / "checkpoints").is_dir():
-        run_dir = latest_run(run_dir)
+    run_dir = resolve_run(run) if run is not None else latest_run(runs_root)
     from hybridneus.errors import DatasetError
     from hybridneus.fileio import check_output
 

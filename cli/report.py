@@ -32,14 +32,13 @@ def report(
     import webbrowser
 
     from hybridneus.report import write_report
-    from hybridneus.training.runs import LATEST, latest_run
+    from hybridneus.training.runs import resolve_run
 
     if not run.exists():
         from hybridneus.errors import RunError
 
         raise RunError(f"{run}: run folder does not exist")
-    if not (run / "config.yaml").is_file() and (run / LATEST).is_file():
-        run = latest_run(run)
+    run = resolve_run(run)
     tick = time.perf_counter()
     path = write_report(run, mesh=mesh, scores=scores, out=out)
     size = path.stat().st_size / 2**20

@@ -214,8 +214,9 @@ def build_field(cfg: Config, scene: dict[str, Any]):
     )
 
 
-def _resolve_run(run_dir: str | os.PathLike) -> Path:
-    """``run_dir`` itself, or the latest run when it is a runs root with a ``latest`` file."""
+def resolve_run(run_dir: str | os.PathLike) -> Path:
+    """``run_dir`` itself, or the latest run when it is a runs root with a ``latest`` file
+    (what every command that reads a run takes as RUN)."""
     run_dir = Path(run_dir)
     if not (run_dir / CHECKPOINT).is_file() and (run_dir / LATEST).is_file():
         return latest_run(run_dir)
@@ -242,7 +243,7 @@ def load_field(
     from hybridneus.device import resolve_device
     from hybridneus.training.state import position
 
-    run_dir = _resolve_run(run_dir)
+    run_dir = resolve_run(run_dir)
     dev = resolve_device(device)
     state = load_checkpoint(run_dir) if checkpoint is None else checkpoint
     try:
@@ -274,7 +275,7 @@ def load_cameras(
     from hybridneus.data.dataset import read_camera_centres
     from hybridneus.errors import DatasetError
 
-    run_dir = _resolve_run(run_dir)
+    run_dir = resolve_run(run_dir)
     state = load_checkpoint(run_dir) if checkpoint is None else checkpoint
     saved = state.get("scene", {}).get("cameras")
     if saved:
