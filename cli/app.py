@@ -13,6 +13,9 @@ import typer
 
 from hybridneus.errors import HybridNeusError
 
+#: Exit code of a command stopped by Ctrl-C (128 + SIGINT, what shells report).
+INTERRUPTED = 130
+
 app = typer.Typer(
     name="hybridneus",
     help="Coloured 3D meshes from a single colour event camera (EventNeuS, pure PyTorch).",
@@ -43,7 +46,7 @@ for _name, _module, _func in _COMMANDS:
 def main() -> None:
     """Console-script entry point: bad input becomes one line on stderr and exit code 2."""
     try:
-        app(standalone_mode=False)
+        code = app(standalone_mode=False)
     except HybridNeusError as exc:
         typer.echo(f"error: {exc}", err=True)
         sys.exit(2)
@@ -51,10 +54,10 @@ def main() -> None:
         sys.exit(exc.exit_code)
     except typer.Abort:
         typer.echo("aborted", err=True)
-        sys.exit(130)
+        sys.exit(INTERRUPTED)
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
-        sys.exit(130)
+        sys.exit(INTERRUPTED)
     except Exception as exc:
         # Usage errors (unknown option, missing argument) come from the click that Typer
         # bundles; they know how to print themselves and carry exit code 2.
@@ -63,6 +66,12 @@ def main() -> None:
             show()
             sys.exit(code)
         raise
+    # Out of standalone mode Typer turns a Ctrl-C outside a command's own handling into a
+    # returned 130 (its Exit), not a raise: without this the process would end 0, silently.
+    if code == INTERRUPTED:
+        typer.echo("interrupted", err=True)
+    if isinstance(code, int) and code:
+        sys.exit(code)
 
 if __name__ == "__main__":
     main()

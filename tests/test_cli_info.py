@@ -146,3 +146,16 @@ def test_info_shows_what_loading_warns_about(run_cli, scene, caplog):
         code, out, err = run_cli("info", str(scene), *SIZE_ARGS)
     assert code == 0, err
     assert "ignoring unknown preset key 'nosuch'" in caplog.text
+
+
+def test_a_ctrl_c_outside_a_fits_loop_ends_the_command_with_130(run_cli, scene, monkeypatch):
+    # Typer hands such an interrupt back as a return value: ended 0 and silent, a batch took
+    # the fit it stopped while it wrote its curve for a failure
+    import hybridneus.cli.info as info
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(info, "dataset_report", stopped)
+    code, out, err = run_cli("info", str(scene), *SIZE_ARGS)
+    assert code == 130 and "interrupted" in err and out == ""
