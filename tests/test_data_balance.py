@@ -248,3 +248,31 @@ def test_a_path_that_closes_after_its_first_views_gives_its_offset_over_the_loop
     spiral = _orbit(100, 2.0)
     spiral[:, 1, 3] = np.linspace(1.0, 0.0, 100)  # two turns that also come down
     assert closed_span(spiral) is None
+
+
+def test_each_pixel_gets_its_own_offset_where_its_events_can_say_it():
+    from hybridneus.data.balance import pixel_offsets
+    from hybridneus.data.windows import event_frame
+
+    rng = np.random.default_rng(3)
+    scene, threshold = -0.2, 0.1
+    own = scene + rng.normal(0.0, 0.1, (H, W))  # the sensor's threshold mismatch
+    rise = np.where(np.arange(W) < W // 2, 30.0, 0.3)  # busy left half, a quiet right one
+    xs, ys, ps = [], [], []
+    for y in range(H):
+        for x in range(W):
+            n_pos = int(round(rise[x] / (threshold * (1 + own[y, x]))))
+            n_neg = int(round(rise[x] / (threshold * (1 - own[y, x]))))
+            xs += [x] * (n_pos + n_neg)
+            ys += [y] * (n_pos + n_neg)
+            ps += [1] * n_pos + [-1] * n_neg
+    split = _split(xs, ys, rng.random(len(xs)), ps, n_views=10)
+    found = pixel_offsets(split.events, W, H, scene).reshape(H, W)
+    busy, quiet = found[:, : W // 2], found[:, W // 2:]
+    error, spread = np.abs(busy - own[:, : W // 2]), np.abs(own[:, : W // 2] - scene)
+    assert error.max() < 0.06 and error.mean() < 0.25 * spread.mean()
+    assert np.abs(quiet - scene).max() < 0.05
+    # the busy pixels' loops sum to no change with their own offsets, not with the scene's
+    frame = event_frame(split, 0.0, 2.0, found.reshape(-1))[:, : W // 2]
+    one = event_frame(split, 0.0, 2.0, scene)[:, : W // 2]
+    assert np.abs(frame).mean() < 0.25 * np.abs(one).mean()

@@ -193,6 +193,42 @@ def balance_offset(events: EventStream, width: int, height: int) -> PolarityBala
     return PolarityBalance(float(np.median(ratio)), pixels, held)
 
 
+def pixel_offsets(events: EventStream, width: int, height: int, offset: float) -> np.ndarray:
+    """Each pixel's own polarity offset, shrunk towards the scene's ``offset``.
+
+    A sensor's ON and OFF thresholds differ from pixel to pixel (their mismatch), so one
+    offset leaves each pixel a drift of its own; over a closed path a pixel's balance says
+    its offset, ``(n- - n+) / n``, with a sampling variance of about ``(1 - o^2) / n``. The
+    estimate weighs it against ``offset`` by those two variances (``k / (n + k)`` on the
+    scene's, ``k`` the sampling variance over the spread the pixels' balances show beyond
+    it): a pixel with few events keeps about the scene's offset.
+
+    Args:
+        events: the stream (polarities -1/+1), as :func:`balance_offset` takes it.
+        width: image width.
+        height: image height.
+        offset: the scene's offset (:func:`balance_offset`'s estimate).
+
+    Returns:
+        (height * width,) float32 offsets, in the order of ``row * width + column``.
+    """
+    code = events.pixel_code(width)
+    counts = np.zeros(2 * width * height, np.int64)
+    for start in range(0, code.size, _CHUNK):
+        counts += np.bincount(code[start:start + _CHUNK], minlength=counts.size)
+    neg, pos = counts.reshape(-1, 2).T.astype(np.float64)
+    n = neg + pos
+    counted = n >= MIN_EVENTS
+    own = np.where(n > 0, (neg - pos) / np.maximum(n, 1.0), offset)
+    sampling = (1.0 - offset ** 2) / np.maximum(n, 1.0)
+    spread = float(np.mean((own[counted] - offset) ** 2) - np.mean(sampling[counted])) \
+        if counted.any() else 0.0
+    if spread <= 0.0:
+        return np.full(n.shape, offset, np.float32)
+    trust = spread / (spread + sampling)
+    return (offset + trust * (own - offset)).clip(-0.95, 0.95).astype(np.float32)
+
+
 def polarity_balance(
     split: SplitData,
     slab_views: float = 2.0,

@@ -41,7 +41,7 @@ def event_extent(
     Returns:
         ``C * |E|`` at the percentile, or ``None`` when no window holds an event.
     """
-    from hybridneus.data.windows import event_frame
+    from hybridneus.data.windows import event_frame, offset_of
 
     n = split.n_views
     if n < 2:
@@ -51,7 +51,7 @@ def event_extent(
     ends = np.unique(np.linspace(span, n - 1, num=max(1, n_windows)).round().astype(int))
     values = []
     for i in ends:
-        frame = event_frame(split, (i - span) * dt, i * dt, preset.polarity_offset)
+        frame = event_frame(split, (i - span) * dt, i * dt, offset_of(split, preset))
         values.append(np.abs(frame[frame != 0]))
     counts = np.concatenate(values)
     if counts.size == 0:

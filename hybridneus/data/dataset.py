@@ -63,6 +63,9 @@ class SplitData:
         rgb_paths: paths of the rgb files in view order, or None when ``rgb/`` is absent.
         lens: the distorted lens ``scene.json`` states (OpenCV's models; rays then come from
             its per-pixel table), or None.
+        pixel_offset: (height * width,) float32 polarity offsets of each pixel
+            (:func:`hybridneus.data.balance.pixel_offsets`) used in place of the preset's
+            one, or None.
     """
 
     name: str
@@ -76,6 +79,7 @@ class SplitData:
     events: EventStream
     rgb_paths: list[Path] | None = None
     lens: Lens | None = None
+    pixel_offset: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:

@@ -35,6 +35,7 @@ estimating nothing again.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 from dataclasses import dataclass, field
 from typing import Any
@@ -133,7 +134,8 @@ def estimate_scene(
         _threshold(found, split, take_offset=cfg.polarity_offset and data.polarity_offset is None)
     if (cfg.polarity_offset and data.polarity_offset is None
             and "polarity_offset" not in found.taken):
-        _polarity_offset(found, split)
+        _polarity_offset(found, split, cfg.pixel_offsets)
+        split = found.dataset[data.split]
     if cfg.crop and all(getattr(data, k) is None for k in CROP_KEYS):
         _crop(found, split)
     if cfg.tonemap_eps and data.tonemap_eps is None:
@@ -206,7 +208,7 @@ def _threshold(found: Estimates, split, take_offset: bool) -> None:
                "estimate.threshold=false keeps the guess)")
 
 
-def _polarity_offset(found: Estimates, split) -> None:
+def _polarity_offset(found: Estimates, split, pixels: bool = False) -> None:
     from hybridneus.data.balance import between_views, closed_path, closed_span
 
     closed, gap = closed_path(split.c2w)
@@ -240,6 +242,16 @@ def _polarity_offset(found: Estimates, split) -> None:
     found.take({"polarity_offset": suggested},
                f"{suggested:g} from the events' balance (the {found.dataset.preset_source} "
                f"guessed {p.polarity_offset:g}; estimate.polarity_offset=false keeps the guess)")
+    if pixels:
+        from hybridneus.data.balance import pixel_offsets
+        from hybridneus.data.denoise import denoised_split
+
+        kept = denoised_split(counted, NOISE_SLAB)[0]
+        own = pixel_offsets(kept.events, split.width, split.height, suggested)
+        found.dataset = with_split(found.dataset, dataclasses.replace(split, pixel_offset=own))
+        found.lines.append(
+            f"polarity: each pixel's own offset from its balance (spread {own.std():.3f}, "
+            f"{own.min():+.2f} .. {own.max():+.2f})")
 
 
 def _crop(found: Estimates, split) -> None:
@@ -314,8 +326,6 @@ def training_data(dataset: EventDataset, cfg: Config, pose_window: int | None = 
     ``refine.pose_smoothing`` views (``pose_window`` where that is -1: the window
     :func:`estimate_scene` chose) and outline the hull's free space over the crop's box, its
     votes counted on ``device``. Nothing is estimated here; ``dataset`` is not changed."""
-    import dataclasses
-
     import numpy as np
     import torch
 

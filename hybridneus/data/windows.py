@@ -109,8 +109,14 @@ def _index_ranges(
     return [(int(np.searchsorted(t, t0, side="left")), int(np.searchsorted(t, t1, side="left")))]
 
 
+def offset_of(split: SplitData, preset) -> float | np.ndarray:
+    """The polarity offset ``split``'s event frames take: its pixels' own where it holds
+    them, else the ``preset``'s."""
+    return split.pixel_offset if split.pixel_offset is not None else preset.polarity_offset
+
+
 def event_frame(
-    split: SplitData, t0: float, t1: float, polarity_offset: float = 0.0
+    split: SplitData, t0: float, t1: float, polarity_offset: float | np.ndarray = 0.0
 ) -> np.ndarray:
     """Accumulated events of the window ``[t0, t1)`` (times as stored in the npz).
 
@@ -119,7 +125,8 @@ def event_frame(
         t0: window start. A negative ``t0`` (>= -T) wraps (cyclic captures): the window is
             ``[t0 + T, T]`` plus ``[0, t1)`` with ``T = max(t)``.
         t1: window end (exclusive).
-        polarity_offset: added to each event's polarity (-1/+1).
+        polarity_offset: added to each event's polarity (-1/+1): one value, or one per
+            pixel ((height * width,), row-major).
 
     Returns:
         (height, width) float32 ``E[y, x] = sum(p + polarity_offset)``; an event at
@@ -251,7 +258,7 @@ class EventWindowSampler:
 
     def frame(self, t0: float, t1: float) -> np.ndarray:
         """(height, width) float32 event frame of ``[t0, t1)`` with the preset's offset."""
-        return event_frame(self.split, t0, t1, self.preset.polarity_offset)
+        return event_frame(self.split, t0, t1, offset_of(self.split, self.preset))
 
     def pose_at(self, t: float) -> tuple[np.ndarray, int]:
         """Camera-to-world (4, 4) at time ``t`` in [0, T] and the nearest view index."""
