@@ -34,8 +34,10 @@ def scans(tmp_path_factory) -> Path:
     return root
 
 
-def _manifest(folder: Path, jobs: list[dict], iters: int = 2, mesh=None) -> Path:
-    doc = {"defaults": {"iters": iters, "set": SETTINGS,
+def _manifest(folder: Path, jobs: list[dict], iters: int = 2, mesh=None,
+              report: bool = False) -> Path:
+    """The tiny fits' manifest; only the tests that look at the pages have them written."""
+    doc = {"defaults": {"iters": iters, "set": SETTINGS, "report": report,
                         "mesh": mesh if mesh is not None else {"res": 16, "color": False}},
            "jobs": jobs}
     path = folder / "manifest.yaml"
@@ -63,7 +65,7 @@ def test_a_manifest_states_defaults_once_and_expands_seeds(tmp_path):
                      "mesh": {"res": 200}},
         "jobs": [{"name": "mug", "data": "scans/mug", "gt": "scans/mug.ply"},
                  {"name": "cup", "recording": "/rec/cup.aedat4", "seeds": [0, 1],
-                  "convert": ["--poses", "cup.csv"], "mesh": False}]}))
+                  "convert": ["--poses", "cup.csv"], "mesh": False, "report": False}]}))
     jobs = load_manifest(path)
     assert [j.id for j in jobs] == ["mug", "cup-s0", "cup-s1"]
     mug, cup = jobs[0], jobs[2]
@@ -72,6 +74,7 @@ def test_a_manifest_states_defaults_once_and_expands_seeds(tmp_path):
     assert mug.mesh == {"res": 200, "color": True}
     assert cup.recording == "/rec/cup.aedat4" and cup.data is None and cup.seed == 1
     assert cup.mesh is None and cup.convert == ("--poses", "cup.csv")
+    assert mug.report and not cup.report
 
 
 @pytest.mark.parametrize("doc, message", [
@@ -83,6 +86,7 @@ def test_a_manifest_states_defaults_once_and_expands_seeds(tmp_path):
      "defaults: unknown key 'gt'"),
     ({"jobs": [{"name": "a", "data": "d", "iters": -3}]}, "'iters' must be a positive"),
     ({"jobs": [{"name": "a/b", "data": "d"}]}, "'name' must be a plain folder name"),
+    ({"jobs": [{"name": "a", "data": "d", "report": "no"}]}, "'report' must be true or false"),
 ])
 def test_a_bad_manifest_is_one_line_naming_the_file(tmp_path, doc, message):
     from hybridneus.batch import load_manifest
@@ -99,7 +103,7 @@ def test_a_bad_manifest_is_one_line_naming_the_file(tmp_path, doc, message):
 def test_a_failed_job_leaves_the_others_and_a_rerun_does_only_it(scans, tmp_path):
     manifest = _manifest(tmp_path, [
         {"name": "good", "data": str(scans / "device"), "gt": str(scans / "device/gt_mesh.ply")},
-        {"name": "late", "data": str(tmp_path / "late")}])
+        {"name": "late", "data": str(tmp_path / "late")}], report=True)
     runs = tmp_path / "runs"
     proc = _batch(str(manifest), "--out", str(runs), "--workers", "2", "--threads", "1")
     assert proc.returncode == 1, proc.stderr
@@ -189,6 +193,8 @@ def test_a_batch_stopped_mid_way_is_finished_by_a_rerun_each_job_once(scans, tmp
     # b went on from its checkpoint, in the run folder it had started
     assert state["b"]["attempts"] == 2 and "--resume" in _fits(runs / "b")[-1]
     assert len([p for p in (runs / "b" / "fit").iterdir() if p.is_dir()]) == 1
+    # report: false (the manifest's) wrote no page
+    assert "report" not in state["a"] and not list((runs / "a" / "fit").glob("*/report.html"))
 
 
 def test_a_missing_engine_names_its_extra(scans, tmp_path, monkeypatch):

@@ -134,7 +134,7 @@ def run_job(spec: dict[str, Any] | JobSpec, runs: str | Path, threads: int = 0,
         args += ["--mesh", record["mesh"]]
     if (folder / "eval.json").is_file():
         args += ["--eval", str(folder / "eval.json")]
-    if not _newer(report, [run / "metrics.csv", *map(Path, args[2::2])]):
+    if job.report and not _newer(report, [run / "metrics.csv", *map(Path, args[2::2])]):
         try:
             step("report", *args)
         except JobFailed as exc:  # a page not written takes nothing from the job's results

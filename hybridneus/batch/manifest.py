@@ -18,7 +18,8 @@
         seeds: [0, 1]
 
 Relative paths are taken from the manifest's folder. A job with several seeds becomes one job
-per seed, named ``<name>-s<seed>``. ``mesh: false`` stops after the fit.
+per seed, named ``<name>-s<seed>``. ``mesh: false`` stops after the fit; ``report: false``
+leaves out the run's ``report.html`` (``hybridneus report`` writes it later).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from hybridneus.errors import ConfigError
 #: Keys a job may state; every one but ``name``, ``data``, ``recording`` and ``gt`` may also
 #: stand in ``defaults``.
 JOB_KEYS = ("name", "data", "recording", "convert", "preset", "set", "seeds", "iters",
-            "minutes", "device", "mesh", "gt")
+            "minutes", "device", "mesh", "report", "gt")
 DEFAULT_KEYS = tuple(k for k in JOB_KEYS if k not in ("name", "data", "recording", "gt"))
 #: Meshing when a manifest does not say: EventNeRF's resolution, coloured.
 DEFAULT_MESH = {"res": 300, "color": True}
@@ -55,6 +56,7 @@ class JobSpec:
         device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N``.
         mesh: ``{"res": int, "color": bool}``, or None for no mesh.
         gt: a ground-truth mesh to score against, or None.
+        report: write the run's ``report.html`` last (``hybridneus report``).
     """
 
     id: str
@@ -69,6 +71,7 @@ class JobSpec:
     device: str = "auto"
     mesh: dict | None = field(default_factory=lambda: dict(DEFAULT_MESH))
     gt: str | None = None
+    report: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -156,8 +159,11 @@ def _expand(path: Path, k: int, entry: dict) -> list[JobSpec]:
         mesh = {**DEFAULT_MESH, **mesh}
     else:
         raise ConfigError(f"{where}: 'mesh' must be true, false or {{res: N, color: bool}}")
+    report = entry.get("report", True)
+    if not isinstance(report, bool):
+        raise ConfigError(f"{where}: 'report' must be true or false")
     common = dict(
-        data=where_is("data"), recording=where_is("recording"),
+        report=report, data=where_is("data"), recording=where_is("recording"),
         convert=_strings(where, "convert", entry.get("convert", [])),
         preset=str(entry.get("preset", "fast")),
         overrides=_strings(where, "set", entry.get("set", [])),

@@ -14,21 +14,52 @@
 - :func:`convert_recording` writes the EventNeRF layout with ``scene.json``.
 """
 
-from hybridneus.recordings.calibration import Calibration, read_calibration
-from hybridneus.recordings.clock import ClockEstimate, estimate_clock_offset
-from hybridneus.recordings.colmap import is_colmap_model, read_colmap_track
-from hybridneus.recordings.convert import ConvertOptions, convert_recording
-from hybridneus.recordings.events import EventChunk, EventSource, open_events
-from hybridneus.recordings.frame import SceneFrame, fit_frame, read_scene_frame
-from hybridneus.recordings.frames import ApsFrame, read_frames
-from hybridneus.recordings.pose_tables import read_pose_table
-from hybridneus.recordings.poses import (
-    PoseTrack,
-    Turntable,
-    make_track,
-    read_matrix,
-    read_turntable,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from hybridneus.recordings.calibration import Calibration, read_calibration
+    from hybridneus.recordings.clock import ClockEstimate, estimate_clock_offset
+    from hybridneus.recordings.colmap import is_colmap_model, read_colmap_track
+    from hybridneus.recordings.convert import ConvertOptions, convert_recording
+    from hybridneus.recordings.events import EventChunk, EventSource, open_events
+    from hybridneus.recordings.frame import SceneFrame, fit_frame, read_scene_frame
+    from hybridneus.recordings.frames import ApsFrame, read_frames
+    from hybridneus.recordings.pose_tables import read_pose_table
+    from hybridneus.recordings.poses import (
+        PoseTrack,
+        Turntable,
+        make_track,
+        read_matrix,
+        read_turntable,
+    )
+
+# Each name's module, imported on first use: a fit reads a converted dataset's frame
+# (recordings.frame) and should not pay for the clock estimate's scipy.signal or the readers.
+_MODULES = {
+    "Calibration": "calibration", "read_calibration": "calibration",
+    "ClockEstimate": "clock", "estimate_clock_offset": "clock",
+    "is_colmap_model": "colmap", "read_colmap_track": "colmap",
+    "ConvertOptions": "convert", "convert_recording": "convert",
+    "EventChunk": "events", "EventSource": "events", "open_events": "events",
+    "SceneFrame": "frame", "fit_frame": "frame", "read_scene_frame": "frame",
+    "ApsFrame": "frames", "read_frames": "frames",
+    "read_pose_table": "pose_tables",
+    "PoseTrack": "poses", "Turntable": "poses", "make_track": "poses",
+    "read_matrix": "poses", "read_turntable": "poses",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "ApsFrame",
