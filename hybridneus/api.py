@@ -148,7 +148,7 @@ def prepare(
     from hybridneus.device import resolve_device
     from hybridneus.training import runs
     from hybridneus.training.runlog import RunLogger
-    from hybridneus.training.scene import FILENAME, SceneRecord
+    from hybridneus.training.scene import FILENAME, SceneRecord, save_pixel_offsets
     from hybridneus.training.trainer import Trainer, default_scene_name
 
     started = time.perf_counter() if started is None else started
@@ -170,11 +170,14 @@ def prepare(
         n_rays=rays_per_step(cfg, dev), device=str(dev), version=__version__,
         pose_window=found.pose_window, hot_pixels=[list(xy) for xy in found.hot_pixels],
     )
+    offsets = found.dataset[cfg.data.split].pixel_offset
     trainer = Trainer(cfg, training_data(found.dataset, cfg, found.pose_window, dev), record,
                       dev)
     logger = None
     if out is not None:
         logger = RunLogger(runs.new_run_dir(out, default_scene_name(data.root)), Path(out))
+        if offsets is not None:
+            record.pixel_offsets = save_pixel_offsets(logger.run_dir, offsets)
     if cfg.train.minutes > 0:
         _fix_budget(trainer, logger, started + 60.0 * cfg.train.minutes)
     if logger is not None:
@@ -283,6 +286,15 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
         from hybridneus.data.hot import without_pixels
 
         data = with_split(data, without_pixels(data[record.split], record.hot_pixels))
+    if record.pixel_offsets:
+        import dataclasses
+
+        from hybridneus.data.estimate import with_split
+        from hybridneus.training.scene import load_pixel_offsets
+
+        split = data[record.split]
+        offsets = load_pixel_offsets(run_dir, record, split.width * split.height)
+        data = with_split(data, dataclasses.replace(split, pixel_offset=offsets))
     trainer = Trainer(cfg, training_data(data, cfg, record.pose_window, dev), record, dev)
     try:
         trainer.load_state_dict(state)

@@ -276,3 +276,29 @@ def test_each_pixel_gets_its_own_offset_where_its_events_can_say_it():
     frame = event_frame(split, 0.0, 2.0, found.reshape(-1))[:, : W // 2]
     one = event_frame(split, 0.0, 2.0, scene)[:, : W // 2]
     assert np.abs(frame).mean() < 0.25 * np.abs(one).mean()
+
+
+def test_a_fit_with_pixel_offsets_keeps_them_for_its_resume(lopsided, tmp_path):
+    from conftest import TINY_FIT
+
+    from hybridneus.api import fit, prepare
+    from hybridneus.errors import RunError
+    from hybridneus.training.scene import PIXEL_OFFSETS, SceneRecord
+
+    custom, _ = lopsided
+    cfg = _config(*TINY_FIT, "train.iters=2", "estimate.pixel_offsets=true")
+    run = fit(custom, cfg, out=tmp_path / "runs", device="cpu", report=False).run_dir
+    assert SceneRecord.load(run / "scene.yaml").pixel_offsets == PIXEL_OFFSETS
+    saved = np.load(run / PIXEL_OFFSETS)
+    # a simulated sensor with no threshold mismatch: its pixels' balances spread no more
+    # than their counts explain, and each keeps the scene's offset
+    assert saved.shape == (W * H,) and np.ptp(saved) < 1e-6
+    assert saved.mean() == pytest.approx(-0.4, abs=0.05)
+    trainer, _ = prepare(None, None, overrides=["train.iters=3"], resume=run, device="cpu")
+    assert np.array_equal(trainer.windows.split.pixel_offset, saved)
+    # a stated offset: no pixel of its own
+    stated = _config("data.polarity_offset=-0.1", "estimate.pixel_offsets=true")
+    assert _estimated(stated, custom).dataset["train"].pixel_offset is None
+    (run / PIXEL_OFFSETS).write_bytes(b"not numpy")
+    with pytest.raises(RunError, match=f"{PIXEL_OFFSETS}: cannot read"):
+        prepare(None, None, overrides=["train.iters=3"], resume=run, device="cpu")

@@ -18,12 +18,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from hybridneus.errors import RunError
 from hybridneus.fileio import atomic_path
 
 FILENAME = "scene.yaml"
+#: Each pixel's polarity offset, beside the record (``estimate.pixel_offsets``).
+PIXEL_OFFSETS = "pixel_offsets.npy"
 #: Preset fields a resume applies to the dataset (the rest the dataset states itself).
 PRESET_KEYS = ("threshold", "polarity_offset", "max_window", "cyclic", "neg_ratio",
                "tonemap_eps", "crop_r", "crop_y_min", "crop_y_max", "background")
@@ -57,6 +60,9 @@ class SceneRecord:
         version: the hybridneus version that wrote the record.
         hot_pixels: the ``[x, y]`` pixels whose events the fit left out
             (``estimate.hot_pixels``); a resumed fit leaves out the same.
+        pixel_offsets: the file in the run folder (:data:`PIXEL_OFFSETS`) holding each
+            pixel's polarity offset (``estimate.pixel_offsets``), or ``None``; a resumed fit
+            takes the same.
     """
 
     dataset: str
@@ -75,6 +81,7 @@ class SceneRecord:
     replans: int = 0
     paces: list[float] | None = None
     hot_pixels: list[list[int]] = field(default_factory=list)
+    pixel_offsets: str | None = None
 
     def preset_overrides(self) -> dict[str, Any]:
         """The preset values to give the dataset reader so that it uses this record's."""
@@ -104,6 +111,9 @@ class SceneRecord:
                        "  training poses as given (the track is too short to smooth)")
         if self.hot_pixels:
             out.append(f"  {len(self.hot_pixels)} hot pixels left out")
+        if self.pixel_offsets:
+            out.append("  each pixel's own polarity offset, from its balance "
+                       f"({self.pixel_offsets})")
         if self.stopped_at is not None:
             out.append(f"  stopped at step {self.stopped_at}: the time budget ran out")
         return out
@@ -145,6 +155,34 @@ class SceneRecord:
             raise RunError(f"{path}: incomplete scene record (missing {missing or 'steps'})")
         _check_pixels(path, record)
         return record
+
+
+def save_pixel_offsets(run_dir: str | os.PathLike, offsets: np.ndarray) -> str:
+    """Write each pixel's polarity offset into ``run_dir`` (atomically); return the file's
+    name, as :attr:`SceneRecord.pixel_offsets` records it."""
+    with atomic_path(Path(run_dir) / PIXEL_OFFSETS) as tmp, open(tmp, "wb") as f:
+        np.save(f, np.asarray(offsets, np.float32), allow_pickle=False)
+    return PIXEL_OFFSETS
+
+
+def load_pixel_offsets(run_dir: str | os.PathLike, record: SceneRecord, size: int) -> np.ndarray:
+    """The offsets :func:`save_pixel_offsets` wrote for ``record``, checked against an image
+    of ``size`` pixels.
+
+    Raises:
+        RunError: the file is missing, unreadable, or not ``size`` offsets in (-1, 1).
+    """
+    path = Path(run_dir) / str(record.pixel_offsets)
+    try:
+        offsets = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise RunError(f"{path}: cannot read the pixels' polarity offsets ({first})") from None
+    if (offsets.shape != (size,) or offsets.dtype.kind != "f"
+            or not np.all(np.abs(offsets) < 1.0)):
+        raise RunError(f"{path}: not {size} polarity offsets in (-1, 1) (shape "
+                       f"{offsets.shape}, {offsets.dtype})")
+    return offsets.astype(np.float32)
 
 
 def _check_pixels(path: Path, record: SceneRecord) -> None:
