@@ -153,7 +153,7 @@ class EstimateConfig:
     crop: bool = True  # shrink the crop cylinder to the events' visual hull (no data.crop_*)
     threshold: bool = False  # C (and ON/OFF) the rgb/ frames imply, if no C is stated
     polarity_offset: bool = True  # the offset the events' balance implies, if none is stated
-    pixel_offsets: bool = False  # with polarity_offset: each pixel's own, from its balance
+    pixel_offsets: bool = True  # with polarity_offset: each pixel's own, from its balance
     tonemap_eps: bool = True  # cap eps at eps_max and at what the events' changes need
     eps_max: float = 1e-3  # tonemap_eps: the largest eps the loss uses
     eps_ease: float = 0.05  # fraction of training over which eps eases in from the preset's
