@@ -167,6 +167,16 @@ def between_views(split: SplitData, first: int, last: int) -> SplitData:
     return replace(split, events=kept_events(ev, slice(a, b)))
 
 
+def _counts(events: EventStream, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """(height * width,) int64 OFF and ON event counts of each pixel."""
+    code = events.pixel_code(width)  # cached: the window sampler counts with it too
+    counts = np.zeros(2 * width * height, np.int64)
+    for start in range(0, code.size, _CHUNK):  # bincount makes an int64 copy of its input
+        counts += np.bincount(code[start:start + _CHUNK], minlength=counts.size)
+    neg, pos = counts.reshape(-1, 2).T
+    return neg, pos
+
+
 def balance_offset(events: EventStream, width: int, height: int) -> PolarityBalance:
     """The polarity offset implied by ``events``, taken as they are (no noise filter).
 
@@ -178,11 +188,7 @@ def balance_offset(events: EventStream, width: int, height: int) -> PolarityBala
     Returns:
         The :class:`PolarityBalance`.
     """
-    code = events.pixel_code(width)  # cached: the window sampler counts with it too
-    counts = np.zeros(2 * width * height, np.int64)
-    for start in range(0, code.size, _CHUNK):  # bincount makes an int64 copy of its input
-        counts += np.bincount(code[start:start + _CHUNK], minlength=counts.size)
-    neg, pos = counts.reshape(-1, 2).T
+    neg, pos = _counts(events, width, height)
     n = neg + pos
     counted = n >= MIN_EVENTS
     pixels = int(np.count_nonzero(counted))
@@ -212,11 +218,7 @@ def pixel_offsets(events: EventStream, width: int, height: int, offset: float) -
     Returns:
         (height * width,) float32 offsets, in the order of ``row * width + column``.
     """
-    code = events.pixel_code(width)
-    counts = np.zeros(2 * width * height, np.int64)
-    for start in range(0, code.size, _CHUNK):
-        counts += np.bincount(code[start:start + _CHUNK], minlength=counts.size)
-    neg, pos = counts.reshape(-1, 2).T.astype(np.float64)
+    neg, pos = (c.astype(np.float64) for c in _counts(events, width, height))
     n = neg + pos
     counted = n >= MIN_EVENTS
     own = np.where(n > 0, (neg - pos) / np.maximum(n, 1.0), offset)

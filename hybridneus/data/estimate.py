@@ -209,12 +209,20 @@ def _threshold(found: Estimates, split, take_offset: bool) -> None:
 
 
 def _polarity_offset(found: Estimates, split, pixels: bool = False) -> None:
-    from hybridneus.data.balance import between_views, closed_path, closed_span
+    from hybridneus.data.balance import (
+        between_views,
+        closed_path,
+        closed_span,
+        pixel_offsets,
+        polarity_balance,
+    )
+    from hybridneus.data.denoise import denoised_split
 
     closed, gap = closed_path(split.c2w)
     span = None if closed else closed_span(split.c2w)
     counted = split if span is None else between_views(split, *span)
-    noise, balance = noise_and_balance(counted)
+    filtered = denoised_split(counted, NOISE_SLAB)
+    noise, balance = filtered[1].line(), polarity_balance(counted, NOISE_SLAB, filtered)
     found.noise, found.balance = noise, balance
     where = "" if span is None else (f", over views {span[0]} .. {span[1]}, where the cameras "
                                      "come back to where they were")
@@ -243,11 +251,7 @@ def _polarity_offset(found: Estimates, split, pixels: bool = False) -> None:
                f"{suggested:g} from the events' balance (the {found.dataset.preset_source} "
                f"guessed {p.polarity_offset:g}; estimate.polarity_offset=false keeps the guess)")
     if pixels:
-        from hybridneus.data.balance import pixel_offsets
-        from hybridneus.data.denoise import denoised_split
-
-        kept = denoised_split(counted, NOISE_SLAB)[0]
-        own = pixel_offsets(kept.events, split.width, split.height, suggested)
+        own = pixel_offsets(filtered[0].events, split.width, split.height, suggested)
         found.dataset = with_split(found.dataset, dataclasses.replace(split, pixel_offset=own))
         found.lines.append(
             f"polarity: each pixel's own offset from its balance (spread {own.std():.3f}, "
