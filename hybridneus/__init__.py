@@ -15,10 +15,8 @@ Example:
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
 from hybridneus.errors import ConfigError, DatasetError, HybridNeusError, MeshError, RunError
+from hybridneus.lazy import lazy_getattr
 
 __version__ = "0.3.0"
 
@@ -46,13 +44,7 @@ _LAZY: dict[str, str] = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'hybridneus' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
 
 
 def __dir__() -> list[str]:

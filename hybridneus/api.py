@@ -262,7 +262,7 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
     """A trainer that continues ``run_dir`` from its last checkpoint, on the scene record's
     values (nothing is estimated again)."""
     from hybridneus.data import load_dataset
-    from hybridneus.data.estimate import training_data
+    from hybridneus.data.estimate import training_data, with_split
     from hybridneus.training import runs
     from hybridneus.training.runlog import RunLogger
     from hybridneus.training.scene import FILENAME, SceneRecord
@@ -282,14 +282,12 @@ def _prepare_resume(run_dir: Path, dataset: Any, config: Any, overrides: Sequenc
     _set_threads(cfg)
     data = load_dataset(path, overrides=record.preset_overrides(), splits=record.split)
     if record.hot_pixels:
-        from hybridneus.data.estimate import with_split
         from hybridneus.data.hot import without_pixels
 
         data = with_split(data, without_pixels(data[record.split], record.hot_pixels))
     if record.pixel_offsets:
         import dataclasses
 
-        from hybridneus.data.estimate import with_split
         from hybridneus.training.scene import load_pixel_offsets
 
         split = data[record.split]

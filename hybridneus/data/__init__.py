@@ -7,8 +7,7 @@ starts without importing torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from hybridneus.data.dataset import EventDataset, SplitData, load_dataset, load_split
 from hybridneus.data.events import EventStream, load_events
@@ -19,6 +18,7 @@ from hybridneus.data.presets import (
     preset_for_scene,
     resolve_preset,
 )
+from hybridneus.lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from hybridneus.data.rays import camera_rays, interpolate_pose, near_far_unit_sphere
@@ -42,13 +42,8 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'hybridneus.data' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"hybridneus.data.{module}"), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, {k: f"{__name__}.{m}" for k, m in _LAZY.items()},
+                           globals())
 
 
 __all__ = [

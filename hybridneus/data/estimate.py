@@ -154,12 +154,14 @@ def estimate_scene(
     return found
 
 
-def noise_and_balance(split) -> tuple[str, Any]:
-    """The noise filter's one-line report and the :class:`PolarityBalance` after it."""
+def noise_and_balance(split, filtered: tuple[Any, Any] | None = None) -> tuple[str, Any]:
+    """The noise filter's one-line report and the :class:`PolarityBalance` after it.
+    ``filtered``: what ``denoised_split(split, NOISE_SLAB)`` returned, if the caller has it."""
     from hybridneus.data.balance import polarity_balance
     from hybridneus.data.denoise import denoised_split
 
-    filtered = denoised_split(split, NOISE_SLAB)
+    if filtered is None:
+        filtered = denoised_split(split, NOISE_SLAB)
     return filtered[1].line(), polarity_balance(split, NOISE_SLAB, filtered)
 
 
@@ -209,20 +211,14 @@ def _threshold(found: Estimates, split, take_offset: bool) -> None:
 
 
 def _polarity_offset(found: Estimates, split, pixels: bool = False) -> None:
-    from hybridneus.data.balance import (
-        between_views,
-        closed_path,
-        closed_span,
-        pixel_offsets,
-        polarity_balance,
-    )
+    from hybridneus.data.balance import between_views, closed_path, closed_span, pixel_offsets
     from hybridneus.data.denoise import denoised_split
 
     closed, gap = closed_path(split.c2w)
     span = None if closed else closed_span(split.c2w)
     counted = split if span is None else between_views(split, *span)
-    filtered = denoised_split(counted, NOISE_SLAB)
-    noise, balance = filtered[1].line(), polarity_balance(counted, NOISE_SLAB, filtered)
+    filtered = denoised_split(counted, NOISE_SLAB)  # the pixels' own offsets count after it too
+    noise, balance = noise_and_balance(counted, filtered)
     found.noise, found.balance = noise, balance
     where = "" if span is None else (f", over views {span[0]} .. {span[1]}, where the cameras "
                                      "come back to where they were")

@@ -16,8 +16,9 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from hybridneus.lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from hybridneus.recordings.calibration import Calibration, read_calibration
@@ -52,13 +53,8 @@ _MODULES = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    module = _MODULES.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, {k: f"{__name__}.{m}" for k, m in _MODULES.items()},
+                           globals())
 
 
 __all__ = [
