@@ -7,12 +7,14 @@ fitted, and scored against the clean direct fit.
    346x260, cached in ``--cache``) and, for the reference, without noise at a symmetric
    threshold, as the suite simulates it.
 2. Re-timed as a hand-held capture (``--duration`` s, log-speed spread ``--variation``), the
-   events written to an AEDAT4 file (dv-processing), the track a 200 Hz CSV in a metric frame
+   events written to an AEDAT4 file (dv-processing) with the camera's APS frames (``--fps``,
+   ``--exposure``, ``--frame-bits`` of linear light; ``--fps 0``: none), the track a 200 Hz
+   CSV in a metric frame
    (rotated, 0.37 m per unit, shifted) on a clock ``--offset`` s ahead, with what motion
    capture writes: occluded rows (empty cells, zeros), repeated stamps and a 40 ms dropout
    (between two views).
 3. ``hybridneus convert davis.aedat4 OUT --poses mocap.csv --calib calib.json --sensor RGGB
-   --clock-offset auto``: no threshold, box or offset stated.
+   --clock-offset auto``: no threshold, box or offset stated (C is taken from the frames).
 4. Both datasets fitted with the same preset, seed and steps, meshed, and scored in the
    original scene's frame with the paper's Chamfer protocol. ``--fits`` adds, to find where a
    gap comes from, ``noisy`` (the DAVIS346 simulation fitted directly, its preset stating the
@@ -77,6 +79,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--variation", type=float, default=1.0)
     ap.add_argument("--offset", type=float, default=0.04, help="pose clock - event clock, s")
+    ap.add_argument("--fps", type=float, default=20.0, help="APS frames a second (0: none)")
+    ap.add_argument("--exposure", type=float, default=0.005, help="APS exposure, s")
+    ap.add_argument("--frame-bits", type=int, default=8, choices=[8, 16])
     ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                     help="a config override for the fits of the converted recording "
                     "(converted, told), to find where a gap comes from (the line keeps it)")
@@ -87,12 +92,18 @@ def main() -> None:
     common.check_tree(args)
 
     import run_suite
+    from PIL import Image
     from scipy.spatial.transform import Rotation
 
     from hybridneus.data import load_dataset
     from hybridneus.recordings import read_scene_frame
     from hybridneus.simulate import DAVIS346_THRESHOLD
-    from hybridneus.simulate.recording import as_recording, handheld_times, write_aedat4
+    from hybridneus.simulate.recording import (
+        aps_frames,
+        as_recording,
+        handheld_times,
+        write_aedat4,
+    )
 
     assets = run_suite.find_assets(args.assets)
     name = run_suite.scene_name(args.scene)
@@ -113,7 +124,15 @@ def main() -> None:
     t0 = 1_650_000_000.0
     rec = as_recording(sp.events, c2w, times, t0=t0, pose_rate=POSE_HZ,
                        clock_offset=args.offset)
-    write_aedat4(work / "davis.aedat4", rec, [], (sp.width, sp.height))
+    frames = []
+    if args.fps > 0:
+        def view_image(i: int) -> np.ndarray:
+            return np.asarray(Image.open(sp.rgb_paths[i]).convert("RGB"))
+
+        frames = aps_frames(view_image, times, args.fps, args.exposure, t0=t0,
+                            bits=args.frame_bits)
+    write_aedat4(work / "davis.aedat4", rec, frames, (sp.width, sp.height))
+    del frames
     # convert places 1000 views evenly from the first to the last event
     views = np.linspace(rec.t[0], rec.t[-1], 1000) + args.offset
     lines, mess = messy_track(rec.tum_rows(), views, np.random.default_rng(args.seed))
@@ -135,6 +154,7 @@ def main() -> None:
             "preset": args.preset, "iters": args.iters, "seed": args.seed,
             "duration_s": args.duration, "variation": args.variation,
             "offset_s": args.offset, "track": mess, "convert_s": convert_s,
+            "frames": {"fps": args.fps, "exposure_s": args.exposure, "bits": args.frame_bits},
             "convert_stderr": proc.stderr.strip().splitlines()}
     if args.sets:
         line["sets"] = list(args.sets)
@@ -146,7 +166,9 @@ def main() -> None:
     est = doc["poses"]["clock_offset_estimate"]
     line |= {"clock_error_ms": 1e3 * (est["offset_s"] - args.offset),
              "clock_sigma_ms": 1e3 * est["uncertainty_s"],
-             "hot_pixels": doc["events"]["hot_pixels"]["n"]}
+             "hot_pixels": doc["events"]["hot_pixels"]["n"],
+             "threshold": {"true": c, "converted": doc["preset"].get("threshold"),
+                           "from_frames": doc["sensor"].get("threshold_from_frames")}}
     told = work / "told"
     if "told" in args.fits:
         shutil.rmtree(told, ignore_errors=True)

@@ -191,6 +191,12 @@ def convert(
         typer.echo(f"clock offset {est['offset_s']:.4f} s +- {est['uncertainty_s'] * 1e3:.2f} ms, "
                    "estimated from the event rate and the camera's speed (coherence "
                    f"{est['coherence']:.2f}; {est['uncertainty_px']:.2f} px at the track's speed)")
+    found = doc["sensor"].get("threshold_from_frames")
+    if found is not None:
+        typer.echo(f"contrast threshold C {found['threshold']:.4g} (ON {found['on']:.4g}, OFF "
+                   f"{found['off']:.4g}), estimated from {found['frames_replayed']} of the "
+                   f"camera's frames ({100 * found['explained']:.0f}% of the events' counts "
+                   "explained)")
     frame = doc["frame"]
     how = "at the camera's frames" if "frames" in doc else f"{spacing} spacing"
     typer.echo(f"{doc['views']['n']} views ({how}, cyclic {doc['preset']['cyclic']}); "

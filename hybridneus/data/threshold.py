@@ -44,7 +44,8 @@ import numpy as np
 from hybridneus.data.dataset import SplitData
 from hybridneus.data.presets import ScenePreset
 
-__all__ = ["ThresholdEstimate", "estimate_thresholds", "replay_counts", "slowest_run"]
+__all__ = ["ThresholdEstimate", "estimate_thresholds", "observed_counts", "replay_counts",
+           "slowest_run", "solve_thresholds"]
 
 #: The least share of the per-pixel event counts' variance the replay must explain.
 MIN_EXPLAINED = 0.5
@@ -179,12 +180,12 @@ def _log_frames(split: SplitData, preset: ScenePreset, views: range, pixels: np.
     return out, known
 
 
-def _observed_counts(split: SplitData, pixels: np.ndarray, t0: float,
-                     t1: float) -> tuple[np.ndarray, np.ndarray]:
-    """(n,) ON and OFF events of ``pixels`` (sorted flat indices) with times in (t0, t1]."""
-    ev = split.events
+def observed_counts(ev, width: int, pixels: np.ndarray, t0: float,
+                    t1: float) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) ON and OFF events of ``ev`` (an :class:`~hybridneus.data.events.EventStream`) at
+    ``pixels`` (sorted flat indices, ``y * width + x``) with times in (t0, t1]."""
     i0, i1 = (int(np.searchsorted(ev.t, t, side="right")) for t in (t0, t1))
-    flat = ev.y[i0:i1].astype(np.int64) * split.width + ev.x[i0:i1]
+    flat = ev.y[i0:i1].astype(np.int64) * width + ev.x[i0:i1]
     at = np.searchsorted(pixels, flat).clip(0, pixels.size - 1)
     hit = pixels[at] == flat
     positive = ev.p[i0:i1] > 0
@@ -273,9 +274,28 @@ def estimate_thresholds(
     except DatasetError as exc:
         return None, f"frames not usable ({exc})"
     times = split.view_times
-    on, off = _observed_counts(split, pixels, float(times[first]),
-                               float(times[first + views - 1]))
-    log_frames, on, off = log_frames[:, known], on[known], off[known]
+    on, off = observed_counts(split.events, split.width, pixels, float(times[first]),
+                              float(times[first + views - 1]))
+    return solve_thresholds(log_frames[:, known], on[known], off[known],
+                            float(preset.threshold), first)
+
+
+def solve_thresholds(log_frames: np.ndarray, on: np.ndarray, off: np.ndarray, start: float,
+                     first: int = 0) -> tuple[ThresholdEstimate | None, str]:
+    """The thresholds whose replay of ``log_frames`` fires the counts ``on`` and ``off``.
+
+    Args:
+        log_frames: (n_frames, n) log brightness of ``n`` pixels, each known (neither black
+            nor saturated) in every frame, over consecutive frames.
+        on: (n,) ON events the stream holds at those pixels over the frames' span.
+        off: (n,) OFF events.
+        start: the threshold the solve starts from.
+        first: the index of the run's first frame (reported).
+
+    Returns:
+        As :func:`estimate_thresholds`.
+    """
+    views = log_frames.shape[0]
     if min(on.sum(), off.sum()) < MIN_EVENTS:
         return None, (f"only {on.sum():.0f} ON and {off.sum():.0f} OFF events at pixels the "
                       "frames show neither black nor saturated")
@@ -283,8 +303,7 @@ def estimate_thresholds(
     moving = change >= MIN_CHANGE  # (the others fire nothing at any threshold above it)
     if moving.sum() < 100:
         return None, STILL_FRAMES
-    solved = _solve(log_frames[:, moving], on[moving].sum(), off[moving].sum(),
-                    float(preset.threshold))
+    solved = _solve(log_frames[:, moving], on[moving].sum(), off[moving].sum(), start)
     if solved is None:
         return None, STILL_FRAMES
     c_on, c_off = solved

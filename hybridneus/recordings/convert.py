@@ -385,7 +385,14 @@ def convert_recording(
                 from hybridneus.recordings.frames import write_frames
 
                 write_frames(frames, split / "rgb", digits)
+            found = None
+            if options.threshold is None:
+                from hybridneus.recordings.frame_threshold import frames_threshold
+
+                found = frames_threshold(source, size, times, frame, track, options,
+                                          split / "events" / "events.npz")
             doc = scene_document(source, track, calib, options, scan, times, frame, cyclic,
-                                 n_pos, size, estimate, frames)
+                                 n_pos, size, estimate, frames, found)
             (tmp / "scene.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
+

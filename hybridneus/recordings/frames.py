@@ -53,8 +53,8 @@ class ApsFrame:
     bits: int = 8
 
 
-def read_frames(path: str | Path, size: tuple[int, int], time_unit: str | None = None
-                ) -> list[ApsFrame]:
+def read_frames(path: str | Path, size: tuple[int, int], time_unit: str | None = None,
+                span: tuple[float, float] | None = None) -> list[ApsFrame]:
     """The camera's frames in a recording, in time order: the first frame track of an AEDAT4
     file, or the ``images`` group of an HDF5 file.
 
@@ -64,29 +64,69 @@ def read_frames(path: str | Path, size: tuple[int, int], time_unit: str | None =
             is refused.
         time_unit: the unit of an HDF5 file's stamps (its events'); None: seconds where the
             stamps are floats, else microseconds.
+        span: (first, last) event-clock seconds: only the frames whose time lies within are
+            kept (the others are not decoded into memory); None: all.
 
     Raises:
         RecordingError: the file holds no frames, or a frame does not cover the sensor.
     """
+    frames, _ = _read(Path(path), size, time_unit, span)
+    return frames
+
+
+def frame_times(path: str | Path, size: tuple[int, int],
+                time_unit: str | None = None) -> np.ndarray:
+    """(n,) the event-clock seconds of every frame in a recording, sorted, without keeping
+    their pixels (:func:`read_frames` for the arguments and errors)."""
+    return _read(Path(path), size, time_unit, (np.inf, -np.inf))[1]
+
+
+def holds_frames(path: str | Path) -> bool:
+    """Whether a recording's format can hold frames and the file holds some."""
     path = Path(path)
     suffix = path.suffix.lower()
+    try:
+        if suffix == ".aedat4":
+            import faery
+
+            with faery.aedat.Decoder(path) as decoder:
+                return any(t.data_type == "frame" for t in decoder.tracks())
+        if suffix in (".h5", ".hdf5", ".hdf"):
+            import h5py
+
+            with h5py.File(path, "r") as f:
+                group = f.get("images")
+                return isinstance(group, h5py.Group) and len(group) > 0
+    except Exception:  # unreadable here: the events' reader says why
+        return False
+    return False
+
+
+def _read(path: Path, size: tuple[int, int], time_unit: str | None,
+          span: tuple[float, float] | None) -> tuple[list[ApsFrame], np.ndarray]:
+    suffix = path.suffix.lower()
+
+    def keep(t: float) -> bool:
+        return span is None or span[0] <= t <= span[1]
+
     if suffix in (".h5", ".hdf5", ".hdf"):
-        frames = _hdf5_frames(path, size, time_unit)
+        frames, times = _hdf5_frames(path, size, time_unit, keep)
     elif suffix == ".aedat4":
-        frames = _aedat4_frames(path, size)
+        frames, times = _aedat4_frames(path, size, keep)
     else:
         raise RecordingError(f"{path}: --views frames needs the camera's frames, which only "
                              "AEDAT4 (iniVation DV) and HDF5 files hold here")
     frames.sort(key=lambda f: f.t)
-    return frames
+    return frames, np.sort(np.asarray(times, dtype=np.float64))
 
 
-def _hdf5_frames(path: Path, size: tuple[int, int], time_unit: str | None) -> list[ApsFrame]:
+def _hdf5_frames(path: Path, size: tuple[int, int], time_unit: str | None,
+                 keep) -> tuple[list[ApsFrame], list[float]]:
     from hybridneus.recordings.events import H5_FAULTS
 
     h5py = need("h5py", path, "HDF5 files")
     need("hdf5plugin", path, "compressed HDF5 files")
-    frames = []
+    frames, times = [], []
     try:
         with h5py.File(path, "r") as f:
             group = f.get("images")
@@ -99,24 +139,29 @@ def _hdf5_frames(path: Path, size: tuple[int, int], time_unit: str | None) -> li
                     raise RecordingError(f"{path}: images/{name} has no timestamp attribute")
                 stamp = np.asarray(dset.attrs["timestamp"]).reshape(-1)[0]
                 unit = time_unit or ("s" if stamp.dtype.kind == "f" else "us")
+                t = float(stamp) * TIME_UNITS[unit]
+                times.append(t)
+                if not keep(t):
+                    continue
                 pixels = np.asarray(dset[()])
                 kind = dset.attrs.get("type", "")
                 if isinstance(kind, bytes):
                     kind = kind.decode()
                 if pixels.ndim == 3 and kind == "color_bgr":
                     pixels = pixels[..., ::-1]
-                frames.append(_as_frame(pixels, float(stamp) * TIME_UNITS[unit], 0.0, size,
-                                        path, (0, 0)))
+                frames.append(_as_frame(pixels, t, 0.0, size, path, (0, 0)))
     except RecordingError:
         raise
     except H5_FAULTS as exc:
         raise RecordingError(f"{path}: reading its frames failed ({first_line(exc)})") from None
-    return frames
+    return frames, times
 
 
-def _aedat4_frames(path: Path, size: tuple[int, int]) -> list[ApsFrame]:
+def _aedat4_frames(path: Path, size: tuple[int, int],
+                   keep) -> tuple[list[ApsFrame], list[float]]:
     faery = need("faery", path, ".aedat4 files")
     frames: list[ApsFrame] = []
+    times: list[float] = []
     try:
         with faery.aedat.Decoder(path) as decoder:
             tracks = [t for t in decoder.tracks() if t.data_type == "frame"]
@@ -125,23 +170,22 @@ def _aedat4_frames(path: Path, size: tuple[int, int]) -> list[ApsFrame]:
                                      f"{', '.join(t.data_type for t in decoder.tracks())})")
             wanted = tracks[0].id
             for track, packet in decoder:
-                if track.id == wanted:
-                    frames.append(_frame(packet, size, path))
+                if track.id != wanted:
+                    continue
+                start, end = packet.exposure_start_t, packet.exposure_end_t
+                t = (0.5 * (start + end) if end > start else packet.t) * 1e-6
+                times.append(t)
+                if keep(t):
+                    frames.append(_as_frame(np.asarray(packet.pixels), t,
+                                            max(0.0, float(end - start) * 1e-6), size, path,
+                                            (packet.offset_x, packet.offset_y)))
     except RecordingError:
         raise
     except Exception as exc:  # faery raises its own errors on a damaged file
         raise RecordingError(f"{path}: reading its frames failed ({first_line(exc)})") from None
-    if not frames:
+    if not times:
         raise RecordingError(f"{path}: the frame track holds no frames")
-    return frames
-
-
-def _frame(packet, size: tuple[int, int], path: Path) -> ApsFrame:
-    start, end = packet.exposure_start_t, packet.exposure_end_t
-    mid = 0.5 * (start + end) if end > start else packet.t
-    return _as_frame(np.asarray(packet.pixels), float(mid) * 1e-6,
-                     max(0.0, float(end - start) * 1e-6), size, path,
-                     (packet.offset_x, packet.offset_y))
+    return frames, times
 
 
 def _as_frame(pixels: np.ndarray, t: float, exposure: float, size: tuple[int, int],
@@ -197,4 +241,5 @@ def encode_srgb(image: np.ndarray) -> np.ndarray:
     return np.round(255.0 * np.clip(image, 0.0, 1.0) ** (1.0 / GAMMA)).astype(np.uint8)
 
 
-__all__ = ["ApsFrame", "encode_srgb", "frames_for_views", "read_frames", "write_frames"]
+__all__ = ["ApsFrame", "encode_srgb", "frame_times", "frames_for_views", "holds_frames",
+           "read_frames", "write_frames"]

@@ -11,13 +11,15 @@ from hybridneus.recordings.frame import SceneFrame, box_crop
 
 
 def scene_document(source, track, calib, options, scan, times, frame: SceneFrame, cyclic,
-                   n_pos, size, estimate=None, frames=None) -> dict:
+                   n_pos, size, estimate=None, frames=None, found=None) -> dict:
     """``scene.json`` of a conversion: what was read, how, and the preset for the reader.
 
     Args are :func:`~hybridneus.recordings.convert.convert_recording`'s inputs and what its
     passes found: the first pass's counts (``scan``), the views' event-clock ``times``, the
     recording frame, whether the track closes a loop, the positive events written, the
-    sensor size, the clock estimate (or None) and the frames the views sit at (or None).
+    sensor size, the clock estimate (or None), the frames the views sit at (or None) and the
+    thresholds taken from the recording's frames (or None: the preset's C is the stated one
+    or the reader's guess).
     """
     w, h = size
     preset: dict = {
@@ -27,6 +29,8 @@ def scene_document(source, track, calib, options, scan, times, frame: SceneFrame
     }
     if options.threshold is not None:
         preset["threshold"] = options.threshold
+    elif found is not None:
+        preset["threshold"] = found["threshold"]
     if options.box is not None:
         preset |= box_crop(frame, options.box)
     if frames is not None:
@@ -37,7 +41,8 @@ def scene_document(source, track, calib, options, scan, times, frame: SceneFrame
         "scene": preset["scene"],
         "width": w,
         "height": h,
-        "sensor": {"mosaic": options.mosaic, "threshold": options.threshold},
+        "sensor": {"mosaic": options.mosaic, "threshold": options.threshold,
+                   **({"threshold_from_frames": found} if found is not None else {})},
         "frame": frame.to_json(),
         "views": {
             "n": options.views, "spacing": options.spacing,
