@@ -1,4 +1,4 @@
-"""A DAVIS's frames kept by ``convert --views frames``: the threshold taken from them.
+"""A DAVIS's frames in a converted recording: the threshold taken from them.
 
 No fit. Each scene is simulated as a DAVIS346 at indoor light (``--noise davis346``: its
 ON / OFF thresholds, mismatch, background activity, hot pixels, refractory period, timestamp
@@ -7,8 +7,10 @@ jitter; 999 views, 346x260, cached in ``--cache``), re-timed as a hand-held capt
 ``--exposure`` (the rendered views' light averaged over each exposure), stored with 8 and
 with 16 bits of linear light (``--bits``), and written with the events into one AEDAT4 file
 (dv-processing, as DV writes it), with a 200 Hz TUM track. That
-recording is converted with ``hybridneus convert --views frames`` as a user would, and the
-thresholds estimated from the kept frames as ``estimate.threshold`` does.
+recording is converted with ``hybridneus convert --views frames`` as a user would. Two
+estimates are scored: the conversion's, on the frames' stored values (what ``scene.json``
+states as C; ``converted``), and the fit's ``estimate.threshold`` on the kept ``rgb/`` files,
+re-encoded as 8-bit sRGB (``estimated``).
 
 One line per scene and bit depth to ``benchmarks/results/frames.jsonl``: the true and
 estimated ON / OFF thresholds, the error of C, the share of the counts the replay explains,
@@ -48,6 +50,8 @@ def main() -> None:
     common.add_arguments(ap, "frames")
     args = ap.parse_args()
     common.check_tree(args)
+
+    import json
 
     import run_suite
     from PIL import Image
@@ -98,6 +102,8 @@ def main() -> None:
             if proc.returncode != 0:
                 raise SystemExit(f"[frames] {name}: convert failed: {proc.stderr.strip()}")
             stages["convert_s"] = round(time.perf_counter() - t, 1)
+            found = json.loads((out / "scene.json").read_text())["sensor"].get(
+                "threshold_from_frames")
             t = time.perf_counter()
             ds = load_dataset(out)
             est, reason = estimate_thresholds(ds["train"], ds.preset)
@@ -109,6 +115,8 @@ def main() -> None:
                     "events": int(len(ds["train"].events)),
                     "true": {"on": true_on, "off": true_off, "threshold": c},
                     **stages}
+            if found is not None:
+                line |= {"converted": found, "converted_error": found["threshold"] / c - 1.0}
             if est is None:
                 line["refused"] = reason
                 shown = f"no estimate: {reason}"
@@ -118,6 +126,9 @@ def main() -> None:
                 shown = (f"C {est.threshold:.4f} against {c:.4f} "
                          f"({100 * line['threshold_error']:+.1f}%)")
             common.append(args.out, line)
+            if found is not None:
+                shown += (f"; at conversion C {found['threshold']:.4f} "
+                          f"({100 * line['converted_error']:+.1f}%)")
             print(f"[frames] {name}, {bits}-bit frames: {len(frames)}, {shown}", file=sys.stderr,
                   flush=True)
 

@@ -687,12 +687,13 @@ def frames_section(rows: list[dict]) -> list[str]:
            "thresholds, mismatch, background activity, hot pixels, refractory period, "
            "timestamp jitter), re-timed as a hand-held capture, with frames at the given rate "
            "and exposure, written with the events into one AEDAT4 file as DV writes it, "
-           "converted with `hybridneus convert --views frames`, and the thresholds estimated "
-           "from the kept frames as `estimate.threshold` does; the frames stored with 8 or 16 "
-           "bits of linear light. Target: C within 10% of the truth. No fit.", "",
-           "| scene | seconds | frames (fps, exposure, bits) | true ON / OFF | estimated ON / OFF "
-           "| C error | explained | commit | date |",
-           "|---|---|---|---|---|---|---|---|---|"]
+           "converted with `hybridneus convert --views frames`; the frames stored with 8 or 16 "
+           "bits of linear light. Two estimates: the conversion's, on the frames' stored values "
+           "(the C that `scene.json` states; lines from 52ff8b5), and `estimate.threshold`'s on "
+           "the kept `rgb/` files (8-bit sRGB). Target: C within 10% of the truth. No fit.", "",
+           "| scene | seconds | frames (fps, exposure, bits) | true ON / OFF | at conversion: "
+           "ON / OFF (C error) | from rgb/: ON / OFF | C error | explained | commit | date |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         t = r["true"]
         if "estimated" in r:
@@ -701,9 +702,14 @@ def frames_section(rows: list[dict]) -> list[str]:
             err, expl = f"{100 * r['threshold_error']:+.1f}%", f"{r['explained']:.2f}"
         else:
             est, err, expl = f"none: {r['refused']}", "-", "-"
+        conv = "-"
+        if "converted" in r:
+            c = r["converted"]
+            conv = (f"{c['on']:.4f} / {c['off']:.4f} "
+                    f"({100 * r['converted_error']:+.1f}%)")
         out.append(f"| {r['scene']} | {r['duration_s']:g} | {r['frames']} ({r['fps']:g}, "
                    f"{1e3 * r['exposure_s']:g} ms, {r.get('bits', 8)}) | {t['on']:.4f} / "
-                   f"{t['off']:.4f} | {est} | {err} | {expl} | {r['commit']} | "
+                   f"{t['off']:.4f} | {conv} | {est} | {err} | {expl} | {r['commit']} | "
                    f"{r['date'][:10]} |")
     return out + _command_lines(rows)
 
@@ -778,6 +784,12 @@ def report_section(rows: list[dict]) -> list[str]:
     return out + _command_lines(rows)
 
 
+def _threshold_cell(r: dict) -> str:
+    """A capture line's C as converted: from the frames, or the guess where none were."""
+    found = r.get("threshold", {}).get("from_frames")
+    return f"{found['threshold']:.4f} (frames)" if found else "0.25 (guess)"
+
+
 def capture_section(rows: list[dict]) -> list[str]:
     """bench_capture.py: a noisy recording with a messy track, converted and fitted."""
     if not rows:
@@ -788,12 +800,14 @@ def capture_section(rows: list[dict]) -> list[str]:
            "200 Hz motion-capture CSV in a metric frame with occluded rows, repeated stamps and "
            "a 40 ms dropout, on a clock ahead by the given offset; converted with nothing "
            "stated but `--sensor RGGB --clock-offset auto`, and fitted beside the noise-free "
-           "scene with the same preset, seed and steps. Target: the converted fit within 1.25x "
-           "of the clean one.", "",
+           "scene with the same preset, seed and steps. From 52ff8b5 the AEDAT4 file also "
+           "holds the camera's APS frames (20 a second, 5 ms, 8 bits of linear light), from "
+           "which the conversion takes C; before, it held none and C was the 0.25 guess (the "
+           "truth: 0.168). Target: the converted fit within 1.25x of the clean one.", "",
            "| scene | seconds, spread | seed | steps | clock error (sigma), ms | hot pixels | "
-           "track rows dropped | CD clean | CD converted | ratio | CD noisy, direct | "
-           "CD converted, told offset and C | commit | date |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "track rows dropped | C converted | CD clean | CD converted | ratio | "
+           "CD noisy, direct | CD converted, told offset and C | commit | date |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     clean = {(r["scene"], r["seed"], r["iters"]): r["chamfer_clean"] for r in rows
              if r.get("chamfer_clean") is not None}
     earlier = False
@@ -801,7 +815,7 @@ def capture_section(rows: list[dict]) -> list[str]:
         if "refused" in r:
             out.append(f"| {r['scene']} | {r['duration_s']:g}, {r['variation']:g} | "
                        f"{r['seed']} | - | refused: {r['refused']} | - | - | - | - | - | - | "
-                       f"- | {r['commit']} | {r['date'][:10]} |")
+                       f"- | - | {r['commit']} | {r['date'][:10]} |")
             continue
         t = r["track"]
         scene = r["scene"] + "".join(f" (converted fits: {v})" for v in r.get("sets", []))
@@ -812,6 +826,7 @@ def capture_section(rows: list[dict]) -> list[str]:
         out.append(f"| {scene} | {r['duration_s']:g}, {r['variation']:g} | {r['seed']} | "
                    f"{r['iters']} | {r['clock_error_ms']:+.1f} ({r['clock_sigma_ms']:.1f}) | "
                    f"{r['hot_pixels']} | {t['occluded']} + {t['repeated']} | "
+                   f"{_threshold_cell(r)} | "
                    f"{_f(r.get('chamfer_clean'))} | {_f(r.get('chamfer_converted'))} | "
                    f"{ratio} | {_fit_cell(r, 'noisy')} | "
                    f"{_fit_cell(r, 'told')} | {r['commit']} | {r['date'][:10]} |")

@@ -1,5 +1,5 @@
-"""A DAVIS's own frames through ``convert --views frames``: views at the frames, the frames
-kept as ``rgb/``, and the contrast threshold taken from them."""
+"""A DAVIS's own frames through ``convert``: the contrast threshold taken from them wherever
+the views sit, and with ``--views frames`` views at the frames, kept as ``rgb/``."""
 
 from __future__ import annotations
 
@@ -107,6 +107,53 @@ def test_the_threshold_comes_from_the_kept_frames(capture, tmp_path, run_cli, re
     assert est.polarity_offset == pytest.approx(o, abs=0.05)
 
 
+@pytest.mark.parametrize("recording", ["davis.aedat4", "davis.h5"])
+def test_convert_takes_the_threshold_from_the_frames_wherever_the_views_sit(
+        capture, tmp_path, run_cli, recording):
+    code, text, err = _convert(capture, run_cli, tmp_path / "data", "--views", "300",
+                               recording=recording)
+    assert code == 0, err
+    doc = json.loads((tmp_path / "data" / "scene.json").read_text())
+    found = doc["sensor"]["threshold_from_frames"]
+    c, o = THRESHOLD
+    assert doc["preset"]["threshold"] == found["threshold"] == pytest.approx(c, rel=0.1)
+    assert found["on"] == pytest.approx(c * (1 + o), rel=0.1)
+    assert found["off"] == pytest.approx(c * (1 - o), rel=0.1)
+    assert found["frames_in_span"] >= len(capture["frames"]) - 2 and found["explained"] > 0.5
+    assert f"contrast threshold C {found['threshold']:.4g}" in text
+    assert "frames" not in doc and "tonemap_eps" not in doc["preset"]  # views along the track
+    ds = load_dataset(tmp_path / "data")
+    assert ds["train"].n_views == 300 and ds["train"].rgb_paths is None
+    assert ds.preset.threshold == found["threshold"] and "threshold" in ds.stated
+    # a stated threshold stands
+    code, text, err = _convert(capture, run_cli, tmp_path / "told", "--threshold", "0.3",
+                               recording=recording)
+    assert code == 0, err
+    doc = json.loads((tmp_path / "told" / "scene.json").read_text())
+    assert doc["preset"]["threshold"] == 0.3 and "threshold_from_frames" not in doc["sensor"]
+    assert "contrast threshold C" not in text
+
+
+def test_frames_that_do_not_show_the_events_leave_the_guess(capture, tmp_path, run_cli):
+    from hybridneus.simulate.recording import aps_frames, write_aedat4
+
+    root = capture["root"]
+    times = np.array([f.t for f in capture["frames"]]) - 100.0
+    still = aps_frames(lambda i: np.full((48, 64, 3), 0.5), times, FPS, EXPOSURE, t0=100.0)
+    write_aedat4(tmp_path / "still.aedat4", capture["rec"], still, (64, 48))
+    write_aedat4(tmp_path / "none.aedat4", capture["rec"], [], (64, 48))
+    for name, warned in (("still", True), ("none", False)):
+        code, text, err = run_cli("convert", str(tmp_path / f"{name}.aedat4"),
+                                  str(tmp_path / name), "--poses", str(root / "poses.txt"),
+                                  "--calib", str(root / "calib.json"), "-q")
+        assert code == 0, err
+        doc = json.loads((tmp_path / name / "scene.json").read_text())
+        assert "threshold" not in doc["preset"] and "threshold_from_frames" not in doc["sensor"]
+        assert (f"{name}.aedat4: the contrast threshold was not taken from its frames (the "
+                "frames do not change" in err) == warned
+        assert "contrast threshold C" not in text
+
+
 def test_frames_are_refused_where_there_are_none(capture, tmp_path, run_cli):
     from hybridneus.recordings.frames import read_frames
     from hybridneus.simulate.recording import write_aedat4, write_hdf5
@@ -173,7 +220,7 @@ def test_sixteen_bit_frames_keep_their_dark_end(capture, tmp_path):
 def test_greyscale_hdf5_frames_on_a_microsecond_clock(tmp_path):
     import h5py
 
-    from hybridneus.recordings.frames import read_frames
+    from hybridneus.recordings.frames import frame_times, holds_frames, read_frames
 
     raw = np.arange(48 * 64, dtype=np.uint32).reshape(48, 64) % 251
     with h5py.File(tmp_path / "grey.h5", "w") as f:
@@ -193,3 +240,8 @@ def test_greyscale_hdf5_frames_on_a_microsecond_clock(tmp_path):
     np.testing.assert_allclose(frames[0].image[..., 1], (raw + 1) / 255.0, atol=1e-6)
     np.testing.assert_array_equal(frames[0].image[..., 0], frames[0].image[..., 2])
     assert read_frames(tmp_path / "grey.h5", (64, 48), "ms")[1].t == pytest.approx(2500.0)
+    # the times of all, the pixels of those inside a span only
+    np.testing.assert_allclose(frame_times(tmp_path / "grey.h5", (64, 48)), [1.0, 2.5])
+    inside = read_frames(tmp_path / "grey.h5", (64, 48), span=(2.0, 3.0))
+    assert [f.t for f in inside] == pytest.approx([2.5])
+    assert holds_frames(tmp_path / "grey.h5") and not holds_frames(tmp_path / "none.h5")
