@@ -127,6 +127,37 @@ def test_a_clean_stream_is_left_whole():
     assert "keeps all" in report.line()
 
 
+def test_a_fit_trains_on_the_events_the_filter_keeps():
+    from hybridneus.config import Config
+    from hybridneus.data.estimate import training_data
+
+    ev, noise = _edge_and_noise(200, noise_rate=0.004)
+    split = _split(ev, 200)
+
+    class Data:
+        root = None
+
+        def __getitem__(self, name):
+            return split
+
+    cfg = Config()
+    cfg.priors.hull.enabled = False
+    trained = training_data(Data(), cfg).split.events
+    filtered = denoised_split(split)[0].events
+    assert len(trained) == len(filtered) < len(ev)
+    assert np.array_equal(trained.t, filtered.t) and np.array_equal(trained.x, filtered.x)
+    # the share of noise among the pixels a window's rays are drawn from falls
+    keep, _ = signal_events(ev, W, H, dt=2.0)
+    assert noise[keep].mean() < 0.25 * noise.mean()
+    cfg.estimate.denoise = False
+    assert training_data(Data(), cfg).split.events is ev
+    # a clean stream is trained on whole, as it is
+    clean = _split(_stream(ev.x[~noise], ev.y[~noise], ev.t[~noise]), 200)
+    Data.__getitem__ = lambda self, name: clean
+    cfg.estimate.denoise = True
+    assert training_data(Data(), cfg).split is clean
+
+
 def test_noise_too_dense_to_measure_keeps_every_event():
     rng = np.random.default_rng(2)
     n = 200_000  # about 0.3 events per pixel and slab: most events have company by chance

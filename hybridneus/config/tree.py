@@ -150,6 +150,7 @@ class EstimateConfig:
     """
 
     hot_pixels: bool = True  # leave out pixels firing far above their neighbours (data.hot)
+    denoise: bool = True  # train on the events the noise filter keeps (data.denoise)
     crop: bool = True  # shrink the crop cylinder to the events' visual hull (no data.crop_*)
     threshold: bool = False  # C (and ON/OFF) the rgb/ frames imply, if no C is stated
     polarity_offset: bool = True  # the offset the events' balance implies, if none is stated

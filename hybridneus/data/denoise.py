@@ -18,8 +18,9 @@ even in the quietest quarter of the image, and then the stream is kept whole too
 
 The polarity-offset estimate (:mod:`hybridneus.data.balance`) counts only the kept events,
 so that balanced noise does not pull it towards 0; ``hybridneus info`` prints the report.
-Training uses every event. Noise right beside the object's moving outline has company and
-stays.
+A fit trains on the kept events too (``estimate.denoise``, :func:`hybridneus.data.estimate.
+training_data`): its rays go to pixels that fired in a window, and on a noisy sensor nearly
+every pixel has. Noise right beside the object's moving outline has company and stays.
 """
 
 from __future__ import annotations

@@ -14,6 +14,10 @@ estimating nothing again.
 - **Hot pixels** (:mod:`hybridneus.data.hot`): pixels firing far more than their neighbours
   are left out of the training split before anything else is estimated (one hot pixel can
   set the eps estimate, and its events ask for a brightness change no surface makes).
+- **Sensor noise** (:mod:`hybridneus.data.denoise`): the fit trains on the events the
+  background-activity filter keeps (``estimate.denoise``). Rays are drawn among the pixels
+  that fired in a window; on a noisy sensor nearly every pixel has, and most rays would go
+  to the empty background. A clean stream is kept whole.
 - **Threshold** (:mod:`hybridneus.data.threshold`, off by default): the ON and OFF thresholds
   whose replay of the sensor over the split's ``rgb/`` frames fires the stream's events, when
   neither the path, ``scene.json`` nor the config states C, a tonemap eps is stated (the
@@ -324,8 +328,10 @@ def training_data(dataset: EventDataset, cfg: Config, pose_window: int | None = 
                   device: Any = "cpu") -> TrainingData:
     """Prepare ``dataset`` for a fit of ``cfg``: smooth the training track over
     ``refine.pose_smoothing`` views (``pose_window`` where that is -1: the window
-    :func:`estimate_scene` chose) and outline the hull's free space over the crop's box, its
-    votes counted on ``device``. Nothing is estimated here; ``dataset`` is not changed."""
+    :func:`estimate_scene` chose), keep the events the noise filter keeps
+    (``estimate.denoise``; a clean stream is kept whole) and outline the hull's free space
+    over the crop's box, its votes counted on ``device``. Nothing is estimated here;
+    ``dataset`` is not changed."""
     import numpy as np
     import torch
 
@@ -344,6 +350,13 @@ def training_data(dataset: EventDataset, cfg: Config, pose_window: int | None = 
 
         split = dataclasses.replace(
             split, c2w=smooth_track(split.c2w, window, cfg.refine.pose_smoothing_order))
+    if cfg.estimate.denoise:
+        from hybridneus.data.denoise import denoised_split
+
+        split, report = denoised_split(split, NOISE_SLAB)
+        if report.kept < report.total:
+            log.info(f"{report.line()}; the fit trains on those (estimate.denoise=false "
+                     "trains on every event)")
     free = None
     clutter = None
     if cfg.priors.hull.enabled:
